@@ -1,0 +1,1 @@
+//! `dh-agents`: policies that must be fast or fuzzable.

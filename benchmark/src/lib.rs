@@ -1,0 +1,1 @@
+//! `dh-benchmark`: the open-loop R1–R3 suite.
