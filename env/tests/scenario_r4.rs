@@ -136,7 +136,7 @@ struct Outcome {
 /// Lateral clearance (m) the test driver keeps from actors beside its path.
 const CLEARANCE_M: f64 = 0.6;
 
-fn drive(s: &ResolvedScenario) -> Outcome {
+fn drive(s: &ResolvedScenario, careful: bool) -> Outcome {
     let mut w = World::new(s, s.seed).unwrap();
     let route: &Polyline = &s.ego.route;
     let p = *w.vehicle_params();
@@ -183,6 +183,10 @@ fn drive(s: &ResolvedScenario) -> Outcome {
                 }
             }
         }
+        if !careful {
+            gap = f64::INFINITY;
+            blocked_static_at = None;
+        }
         // Pass a static blockage in the lane to the left when that lane is free of statics.
         if let Some(bs) = blocked_static_at {
             if bs - progress < 45.0 {
@@ -201,7 +205,7 @@ fn drive(s: &ResolvedScenario) -> Outcome {
             }
         }
         // Red / yellow lights on the route ahead.
-        for l in w.lights() {
+        for l in w.lights().iter().filter(|_| careful) {
             if !matches!(l.color, LightColor::Red | LightColor::Yellow) {
                 continue;
             }
@@ -280,7 +284,7 @@ fn drive(s: &ResolvedScenario) -> Outcome {
 fn every_scenario_is_drivable() {
     let mut failures = Vec::new();
     for s in load_all() {
-        let o = drive(&s);
+        let o = drive(&s, true);
         let l = s.route_length_m();
         // PROTOCOL §2.5 efficiency for a clean run.
         let eff = 0.7 * (1.1 * l / o.travel_m).min(1.0)
@@ -294,4 +298,17 @@ fn every_scenario_is_drivable() {
         }
     }
     assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// The hazard scenarios must actually be hazardous: the same driver blind to actors crashes.
+#[test]
+fn blind_driver_crashes_in_hazard_scenarios() {
+    for s in load_all() {
+        if !["01_pedestrian", "02_obstacles", "07_sudden_brake"].contains(&s.category.as_str()) {
+            continue;
+        }
+        let o = drive(&s, false);
+        eprintln!("{:40} blind: {} at t = {:.1} s", s.id, o.reason, o.time_s);
+        assert!(o.reason.starts_with("contact"), "{}: {o:?}", s.id);
+    }
 }
