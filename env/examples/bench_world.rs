@@ -3,8 +3,8 @@
 //!
 //! `cargo run --release -p dh-env --example bench_world [SCENARIO.toml] [TICKS]`
 
+use dh_env::drive::Control;
 use dh_env::scenario::{ActorMotion, AtEnd, ResolvedActor, Scenario, Trigger};
-use dh_env::world::Control;
 use dh_env::world::World;
 use std::path::PathBuf;
 use std::time::Instant;

@@ -5,10 +5,10 @@
 //! `sumo:` maps need SUMO_HOME (the env var, else `python3 -c "import sumo"`); without it those
 //! scenarios are skipped with a message.
 
+use dh_env::drive::Control;
 use dh_env::geom::{Polyline, Vec2};
 use dh_env::scenario::{LoadOptions, ResolvedScenario, Scenario, CATEGORIES};
 use dh_env::view::{ActorKind, LightColor};
-use dh_env::world::Control;
 use dh_env::world::World;
 use dh_env::DT_S;
 use sha2::{Digest, Sha256};
