@@ -1,1 +1,3 @@
 //! `dh-agents`: policies that must be fast or fuzzable.
+
+pub mod vlm;
