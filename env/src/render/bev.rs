@@ -77,7 +77,11 @@ impl View {
     #[inline(always)]
     fn px(&self, q: [f32; 2]) -> SV {
         let d = [q[0] - self.ego[0], q[1] - self.ego[1]];
-        SV { x: self.c + (d[0] * self.r[0] + d[1] * self.r[1]) * self.s, y: self.c - (d[0] * self.f[0] + d[1] * self.f[1]) * self.s, w: 1.0 }
+        SV {
+            x: self.c + (d[0] * self.r[0] + d[1] * self.r[1]) * self.s,
+            y: self.c - (d[0] * self.f[0] + d[1] * self.f[1]) * self.s,
+            w: 1.0,
+        }
     }
 }
 
@@ -111,7 +115,13 @@ fn line(t: &mut Target, a: SV, b: SV, hw: f32, col: [u8; 3]) {
 
 impl Renderer {
     /// Renders the bird's-eye view into `out` (resized to `size_px`², allocation reused).
-    pub fn render_bev(&mut self, map: &RenderMap, frame: &FrameInput, cfg: &BevConfig, out: &mut Image) -> Result<()> {
+    pub fn render_bev(
+        &mut self,
+        map: &RenderMap,
+        frame: &FrameInput,
+        cfg: &BevConfig,
+        out: &mut Image,
+    ) -> Result<()> {
         cfg.validate()?;
         frame.validate()?;
         out.resize(cfg.size_px, cfg.size_px);
@@ -121,7 +131,13 @@ impl Renderer {
         }
         let ego = frame.ego.pose.pos - map.origin;
         let (sy, cy) = frame.ego.pose.yaw.sin_cos();
-        let v = View { ego: [ego.x as f32, ego.y as f32], f: [cy as f32, sy as f32], r: [sy as f32, -cy as f32], s: cfg.px_per_m as f32, c: n as f32 * 0.5 };
+        let v = View {
+            ego: [ego.x as f32, ego.y as f32],
+            f: [cy as f32, sy as f32],
+            r: [sy as f32, -cy as f32],
+            s: cfg.px_per_m as f32,
+            c: n as f32 * 0.5,
+        };
         let mut t = Target { rgb: &mut out.data, width: n, height: n };
         let half = n as f32 * 0.5 / v.s * std::f32::consts::SQRT_2 + 2.0;
 
@@ -136,7 +152,12 @@ impl Renderer {
         });
         let cols = mat_colors();
         let nf = n as f32;
-        let off = |p: &[SV]| p.iter().all(|q| q.x < 0.0) || p.iter().all(|q| q.y < 0.0) || p.iter().all(|q| q.x > nf) || p.iter().all(|q| q.y > nf);
+        let off = |p: &[SV]| {
+            p.iter().all(|q| q.x < 0.0)
+                || p.iter().all(|q| q.y < 0.0)
+                || p.iter().all(|q| q.x > nf)
+                || p.iter().all(|q| q.y > nf)
+        };
         for layer in 0..N_LAYERS {
             for &ci in &self.cells {
                 let (a, b) = map.cells[ci].tris[layer];
@@ -172,7 +193,13 @@ impl Renderer {
             let across = f.perp() * (l.lane_width_m * 0.5);
             let a = p - across;
             let b = p + across;
-            line(&mut t, v.px([a.x as f32, a.y as f32]), v.px([b.x as f32, b.y as f32]), (0.5 * v.s).max(1.0), col);
+            line(
+                &mut t,
+                v.px([a.x as f32, a.y as f32]),
+                v.px([b.x as f32, b.y as f32]),
+                (0.5 * v.s).max(1.0),
+                col,
+            );
         }
         for s in frame.signs {
             let p = s.pose.pos - map.origin;
@@ -192,11 +219,29 @@ impl Renderer {
             let corner = |fw: f32, lf: f32| v.px([px + fx * fw + lx * lf, py + fy * fw + ly * lf]);
             let o = 1.0 / v.s; // one pixel of outline
             let (hl, hw) = (l * 0.5, w * 0.5);
-            quad(&mut t, [corner(hl + o, hw + o), corner(-hl - o, hw + o), corner(-hl - o, -hw - o), corner(hl + o, -hw - o)], [15, 15, 15]);
+            quad(
+                &mut t,
+                [
+                    corner(hl + o, hw + o),
+                    corner(-hl - o, hw + o),
+                    corner(-hl - o, -hw - o),
+                    corner(hl + o, -hw - o),
+                ],
+                [15, 15, 15],
+            );
             quad(&mut t, [corner(hl, hw), corner(-hl, hw), corner(-hl, -hw), corner(hl, -hw)], a.color);
             if !a.kind.is_static() {
                 let fl = (l * 0.22).max(2.0 / v.s).min(l * 0.5);
-                quad(&mut t, [corner(hl, hw * 0.8), corner(hl - fl, hw * 0.8), corner(hl - fl, -hw * 0.8), corner(hl, -hw * 0.8)], [245, 245, 245]);
+                quad(
+                    &mut t,
+                    [
+                        corner(hl, hw * 0.8),
+                        corner(hl - fl, hw * 0.8),
+                        corner(hl - fl, -hw * 0.8),
+                        corner(hl, -hw * 0.8),
+                    ],
+                    [245, 245, 245],
+                );
             }
         }
         // Route: red polyline through the points, dots on the last ones, then the ego disc.

@@ -62,7 +62,14 @@ impl CameraConfig {
 
     /// A chase camera 7 m behind and 3.2 m above the ego, looking down 12°, ego drawn.
     pub fn chase() -> Self {
-        CameraConfig { fov_deg: 90.0, mount_forward_m: -7.0, mount_height_m: 3.2, pitch_deg: 12.0, draw_ego: true, ..Self::default() }
+        CameraConfig {
+            fov_deg: 90.0,
+            mount_forward_m: -7.0,
+            mount_height_m: 3.2,
+            pitch_deg: 12.0,
+            draw_ego: true,
+            ..Self::default()
+        }
     }
 
     /// Six-camera surround rig modelled on nuScenes (names as in nuScenes), 800×450 each.
@@ -89,7 +96,11 @@ impl CameraConfig {
     /// Checks sizes and angles; names the offending field.
     pub fn validate(&self) -> Result<()> {
         if self.width == 0 || self.height == 0 || self.width > 8192 || self.height > 8192 {
-            return Err(Error::config("camera.width/height", format!("{}x{}", self.width, self.height), "must be 1..=8192"));
+            return Err(Error::config(
+                "camera.width/height",
+                format!("{}x{}", self.width, self.height),
+                "must be 1..=8192",
+            ));
         }
         if !(self.fov_deg > 1.0 && self.fov_deg < 170.0) {
             return Err(Error::config("camera.fov_deg", self.fov_deg, "must be in (1, 170)"));
@@ -109,13 +120,21 @@ impl CameraConfig {
             }
         }
         if !(self.mount_height_m > 0.05) {
-            return Err(Error::config("camera.mount_height_m", self.mount_height_m, "must be above the ground (> 0.05)"));
+            return Err(Error::config(
+                "camera.mount_height_m",
+                self.mount_height_m,
+                "must be above the ground (> 0.05)",
+            ));
         }
         if !(self.pitch_deg.abs() < 89.0) {
             return Err(Error::config("camera.pitch_deg", self.pitch_deg, "must be within ±89"));
         }
         if !(self.draw_distance_m > 1.0 && self.draw_distance_m.is_finite()) {
-            return Err(Error::config("camera.draw_distance_m", self.draw_distance_m, "must be finite and > 1"));
+            return Err(Error::config(
+                "camera.draw_distance_m",
+                self.draw_distance_m,
+                "must be finite and > 1",
+            ));
         }
         Ok(())
     }
@@ -328,7 +347,13 @@ pub(crate) fn dynamic_tris(map: &RenderMap, frame: &FrameInput, draw_ego: bool, 
 
 impl Renderer {
     /// Renders one camera into `out` (resized to the configured size, allocation reused).
-    pub fn render_camera(&mut self, map: &RenderMap, frame: &FrameInput, cfg: &CameraConfig, out: &mut Image) -> Result<()> {
+    pub fn render_camera(
+        &mut self,
+        map: &RenderMap,
+        frame: &FrameInput,
+        cfg: &CameraConfig,
+        out: &mut Image,
+    ) -> Result<()> {
         cfg.validate()?;
         frame.validate()?;
         out.resize(cfg.width, cfg.height);
@@ -348,7 +373,15 @@ impl Renderer {
         Ok(())
     }
 
-    fn draw_scene(&mut self, map: &RenderMap, frame: &FrameInput, cfg: &CameraConfig, cam: &Cam, rgb: &mut [u8], with_ids: bool) {
+    fn draw_scene(
+        &mut self,
+        map: &RenderMap,
+        frame: &FrameInput,
+        cfg: &CameraConfig,
+        cam: &Cam,
+        rgb: &mut [u8],
+        with_ids: bool,
+    ) {
         let (w, h) = (cam.w, cam.h);
         self.depth.clear();
         self.depth.resize(w * h, 0.0);
@@ -378,7 +411,10 @@ impl Renderer {
                     if cam.outside(&p) {
                         continue;
                     }
-                    let cxy = [(gt.p[0][0] + gt.p[1][0] + gt.p[2][0]) / 3.0, (gt.p[0][1] + gt.p[1][1] + gt.p[2][1]) / 3.0];
+                    let cxy = [
+                        (gt.p[0][0] + gt.p[1][0] + gt.p[2][0]) / 3.0,
+                        (gt.p[0][1] + gt.p[1][1] + gt.p[2][1]) / 3.0,
+                    ];
                     let d = ((cxy[0] - cam.pos[0]).powi(2) + (cxy[1] - cam.pos[1]).powi(2)).sqrt();
                     let col = fogged(cols[gt.mat as usize], fog_k(d));
                     let n = cam.clip_project(p, &mut poly);
@@ -425,7 +461,8 @@ impl Renderer {
         let mut dynamic = std::mem::take(&mut self.tris);
         dynamic.clear();
         dynamic_tris(map, frame, cfg.draw_ego, &mut dynamic);
-        let mut dp = DepthPlanes { depth: &mut self.depth, ids: if with_ids { Some(&mut self.ids) } else { None } };
+        let mut dp =
+            DepthPlanes { depth: &mut self.depth, ids: if with_ids { Some(&mut self.ids) } else { None } };
         for &off in &self.cells {
             let c = &map.cells[off];
             for tr in &map.props[c.props.0 as usize..c.props.1 as usize] {
@@ -440,7 +477,12 @@ impl Renderer {
 
     /// Every actor of `frame.actors` the camera sees: silhouette box, centre, distance and the
     /// unoccluded share of its silhouette (from an id buffer of the full scene).
-    pub fn project_actors(&mut self, map: &RenderMap, frame: &FrameInput, cfg: &CameraConfig) -> Result<Vec<ProjectedActor>> {
+    pub fn project_actors(
+        &mut self,
+        map: &RenderMap,
+        frame: &FrameInput,
+        cfg: &CameraConfig,
+    ) -> Result<Vec<ProjectedActor>> {
         cfg.validate()?;
         frame.validate()?;
         let cam = Cam::new(map, frame, cfg, 1);

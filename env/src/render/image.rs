@@ -34,8 +34,14 @@ impl Image {
     }
 
     fn as_buffer(&self) -> Result<image::RgbImage> {
-        image::RgbImage::from_raw(self.width, self.height, self.data.clone())
-            .ok_or_else(|| Error::Render(format!("image buffer of {} bytes does not match {}x{}", self.data.len(), self.width, self.height)))
+        image::RgbImage::from_raw(self.width, self.height, self.data.clone()).ok_or_else(|| {
+            Error::Render(format!(
+                "image buffer of {} bytes does not match {}x{}",
+                self.data.len(),
+                self.width,
+                self.height
+            ))
+        })
     }
 
     /// Encodes as PNG bytes.
@@ -53,7 +59,9 @@ impl Image {
 
     fn encode(&self, fmt: image::ImageFormat) -> Result<Vec<u8>> {
         let mut out = std::io::Cursor::new(Vec::new());
-        self.as_buffer()?.write_to(&mut out, fmt).map_err(|e| Error::Render(format!("{fmt:?} encode: {e}")))?;
+        self.as_buffer()?
+            .write_to(&mut out, fmt)
+            .map_err(|e| Error::Render(format!("{fmt:?} encode: {e}")))?;
         Ok(out.into_inner())
     }
 
@@ -65,7 +73,10 @@ impl Image {
             "jpg" | "jpeg" => self.to_jpeg(90)?,
             "png" => self.to_png()?,
             other => {
-                return Err(Error::Render(format!("{}: unsupported image extension `{other}` (use .png, .jpg)", path.display())))
+                return Err(Error::Render(format!(
+                    "{}: unsupported image extension `{other}` (use .png, .jpg)",
+                    path.display()
+                )))
             }
         };
         std::fs::write(path, bytes).map_err(|e| Error::io(path, e))

@@ -91,10 +91,15 @@ const CELL_M: f32 = 32.0;
 const PIECE_M: f64 = 8.0;
 
 fn is_sidewalk(l: &Lane) -> bool {
-    l.allow.contains(VClass::Pedestrian) && !l.allow.contains(VClass::Passenger) && !l.allow.contains(VClass::Bicycle) && !l.allow.contains(VClass::Bus)
+    l.allow.contains(VClass::Pedestrian)
+        && !l.allow.contains(VClass::Passenger)
+        && !l.allow.contains(VClass::Bicycle)
+        && !l.allow.contains(VClass::Bus)
 }
 fn is_bike_only(l: &Lane) -> bool {
-    l.allow.contains(VClass::Bicycle) && !l.allow.contains(VClass::Passenger) && !l.allow.contains(VClass::Bus)
+    l.allow.contains(VClass::Bicycle)
+        && !l.allow.contains(VClass::Passenger)
+        && !l.allow.contains(VClass::Bus)
 }
 fn is_vehicle_lane(l: &Lane) -> bool {
     !is_sidewalk(l) && (l.allow.0 != 0)
@@ -238,7 +243,10 @@ impl Occupancy {
         let y1 = ((b.max.y - self.min.y) / self.cell).floor() as usize;
         for y in y0..=y1 {
             for x in x0..=x1 {
-                let c = Vec2::new(self.min.x + (x as f64 + 0.5) * self.cell, self.min.y + (y as f64 + 0.5) * self.cell);
+                let c = Vec2::new(
+                    self.min.x + (x as f64 + 0.5) * self.cell,
+                    self.min.y + (y as f64 + 0.5) * self.cell,
+                );
                 // Conservative: the cell centre within half a cell of the triangle.
                 if dist_to_tri(c, t) <= self.cell * 0.75 {
                     self.bits[y * self.nx + x] = true;
@@ -265,7 +273,9 @@ fn dist_to_tri(p: Vec2, t: &[Vec2; 3]) -> f64 {
     if (s0 >= 0.0 && s1 >= 0.0 && s2 >= 0.0) || (s0 <= 0.0 && s1 <= 0.0 && s2 <= 0.0) {
         return 0.0;
     }
-    (0..3).map(|i| crate::geom::closest_on_segment(p, t[i], t[(i + 1) % 3]).1.sqrt()).fold(f64::INFINITY, f64::min)
+    (0..3)
+        .map(|i| crate::geom::closest_on_segment(p, t[i], t[(i + 1) % 3]).1.sqrt())
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// Sample points covering an oriented rectangle every ~1.5 m (for occupancy tests).
@@ -323,7 +333,12 @@ impl Collect {
         for j in 0..k {
             let p0 = a.lerp(b, j as f64 / k as f64) - origin;
             let p1 = a.lerp(b, (j + 1) as f64 / k as f64) - origin;
-            self.segs.push(Seg { a: [p0.x as f32, p0.y as f32], b: [p1.x as f32, p1.y as f32], hw: hw as f32, mat });
+            self.segs.push(Seg {
+                a: [p0.x as f32, p0.y as f32],
+                b: [p1.x as f32, p1.y as f32],
+                hw: hw as f32,
+                mat,
+            });
         }
     }
     fn solid(&mut self, origin: Vec2, pts: &[Vec2], hw: f64, mat: Mat) {
@@ -356,6 +371,11 @@ impl Collect {
 const LINE_HW: f64 = 0.1;
 
 impl RenderMap {
+    /// Precomputes the render geometry of a network (once per map; ~linear in its size).
+    pub fn build(net: &crate::map::Network) -> RenderMap {
+        Self::from_parts(&net.edges, &net.lanes, &net.junctions)
+    }
+
     /// Precomputes render geometry from the parts of a road network.
     pub fn from_parts(edges: &[Edge], lanes: &[Lane], junctions: &[Junction]) -> RenderMap {
         let mut bounds = Aabb::EMPTY;
@@ -455,7 +475,12 @@ impl RenderMap {
                 continue;
             }
             // Lane lines of a normal edge, from the rightmost vehicle lane leftwards.
-            let vl: Vec<&Lane> = e.lanes.iter().filter_map(lane_of).filter(|l| is_vehicle_lane(l) && l.shape.len() >= 2).collect();
+            let vl: Vec<&Lane> = e
+                .lanes
+                .iter()
+                .filter_map(lane_of)
+                .filter(|l| is_vehicle_lane(l) && l.shape.len() >= 2)
+                .collect();
             for (k, l) in vl.iter().enumerate() {
                 let pts = l.shape.points();
                 let hw = l.width_m * 0.5;
@@ -480,9 +505,16 @@ impl RenderMap {
             let kind = j.kind.as_str();
             let controlled = matches!(
                 kind,
-                "traffic_light" | "traffic_light_unregulated" | "traffic_light_right_on_red" | "allway_stop" | "priority_stop" | "right_before_left" | "left_before_right"
+                "traffic_light"
+                    | "traffic_light_unregulated"
+                    | "traffic_light_right_on_red"
+                    | "allway_stop"
+                    | "priority_stop"
+                    | "right_before_left"
+                    | "left_before_right"
             );
-            let minor = kind == "priority" && e.to.and_then(|t| max_in_prio.get(&t)).is_some_and(|&m| e.priority < m);
+            let minor =
+                kind == "priority" && e.to.and_then(|t| max_in_prio.get(&t)).is_some_and(|&m| e.priority < m);
             let mut right_acc = 0.0;
             for l in e.lanes.iter().filter_map(lane_of) {
                 let pts = l.shape.points();
@@ -512,7 +544,10 @@ impl RenderMap {
                 };
                 signal_places.insert(
                     l.id.clone(),
-                    LaneSignalPlace { far_m: far.clamp(6.0, 40.0) as f32 + 1.5, right_m: (right_acc + l.width_m * 0.5 + 0.8) as f32 },
+                    LaneSignalPlace {
+                        far_m: far.clamp(6.0, 40.0) as f32 + 1.5,
+                        right_m: (right_acc + l.width_m * 0.5 + 0.8) as f32,
+                    },
                 );
                 right_acc += l.width_m;
             }
@@ -525,7 +560,12 @@ impl RenderMap {
         Self::bucket(origin, bounds, c, signal_places)
     }
 
-    fn bucket(origin: Vec2, bounds: Aabb, c: Collect, signal_places: HashMap<String, LaneSignalPlace>) -> RenderMap {
+    fn bucket(
+        origin: Vec2,
+        bounds: Aabb,
+        c: Collect,
+        signal_places: HashMap<String, LaneSignalPlace>,
+    ) -> RenderMap {
         let ext = bounds.inflate(80.0);
         let gmin = ext.min - origin;
         let nx = (((ext.max.x - ext.min.x) as f32 / CELL_M).ceil() as usize).max(1);
@@ -545,16 +585,24 @@ impl RenderMap {
             })
             .collect();
         tris.sort_by_key(|(k, l, _)| (*k, *l));
-        let mut segs: Vec<(usize, Seg)> = c.segs.into_iter().map(|s| (key((s.a[0] + s.b[0]) * 0.5, (s.a[1] + s.b[1]) * 0.5), s)).collect();
+        let mut segs: Vec<(usize, Seg)> =
+            c.segs.into_iter().map(|s| (key((s.a[0] + s.b[0]) * 0.5, (s.a[1] + s.b[1]) * 0.5), s)).collect();
         segs.sort_by_key(|(k, _)| *k);
         // Props: keep the triangles of one prop together (they were appended per prop, and a
         // prop is small), keyed by each triangle's first vertex.
-        let mut props: Vec<(usize, Tri3)> = c.props.into_iter().map(|t| (key(t.p[0][0], t.p[0][1]), t)).collect();
+        let mut props: Vec<(usize, Tri3)> =
+            c.props.into_iter().map(|t| (key(t.p[0][0], t.p[0][1]), t)).collect();
         props.sort_by_key(|(k, _)| *k);
 
         let mut grid = vec![u32::MAX; nx * ny];
         let mut cells: Vec<Cell> = Vec::new();
-        let empty = Cell { bb: [f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY], zmax: 0.1, tris: [(0, 0); N_LAYERS], segs: (0, 0), props: (0, 0) };
+        let empty = Cell {
+            bb: [f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY],
+            zmax: 0.1,
+            tris: [(0, 0); N_LAYERS],
+            segs: (0, 0),
+            props: (0, 0),
+        };
         let cell_of = |k: usize, grid: &mut Vec<u32>, cells: &mut Vec<Cell>| -> usize {
             if grid[k] == u32::MAX {
                 grid[k] = cells.len() as u32;
@@ -700,7 +748,14 @@ fn place_props(edges: &[Edge], lanes: &[Lane], origin: Vec2, occ: &mut Occupancy
                 let samples = rect_samples(c, f, hl, hw);
                 if !occ.any(&samples) {
                     occ.mark(&rect_samples(c, f, hl + 1.5, hw + 1.5));
-                    let palette = [[196, 180, 160], [170, 160, 150], [200, 200, 190], [160, 120, 100], [185, 190, 200], [210, 190, 150]];
+                    let palette = [
+                        [196, 180, 160],
+                        [170, 160, 150],
+                        [200, 200, 190],
+                        [160, 120, 100],
+                        [185, 190, 200],
+                        [210, 190, 150],
+                    ];
                     let col = palette[((h >> 40) % palette.len() as u64) as usize];
                     let fr = Frame::new(c, f.angle(), origin, 0.0);
                     mesh::building(out, &fr, hl as f32, hw as f32, height as f32, col);

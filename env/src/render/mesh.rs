@@ -63,7 +63,11 @@ impl Frame {
     }
     #[inline]
     pub fn pt(&self, fwd: f32, left: f32, z: f32) -> [f32; 3] {
-        [self.o[0] + self.f[0] * fwd + self.l[0] * left, self.o[1] + self.f[1] * fwd + self.l[1] * left, self.o[2] + z]
+        [
+            self.o[0] + self.f[0] * fwd + self.l[0] * left,
+            self.o[1] + self.f[1] * fwd + self.l[1] * left,
+            self.o[2] + z,
+        ]
     }
     /// The same frame moved by (fwd, left) and turned by `dyaw` radians.
     pub fn offset(&self, fwd: f32, left: f32, dyaw: f32) -> Frame {
@@ -87,7 +91,16 @@ pub(crate) struct Mesh<'a> {
 }
 
 impl Mesh<'_> {
-    fn quad(&mut self, a: [f32; 3], b: [f32; 3], c: [f32; 3], d: [f32; 3], centre: [f32; 3], col: [u8; 3], emissive: bool) {
+    fn quad(
+        &mut self,
+        a: [f32; 3],
+        b: [f32; 3],
+        c: [f32; 3],
+        d: [f32; 3],
+        centre: [f32; 3],
+        col: [u8; 3],
+        emissive: bool,
+    ) {
         let mut n = normalize(cross(sub(b, a), sub(c, a)));
         if n == [0.0, 0.0, 1.0] && dot(sub(c, a), sub(c, a)) == 0.0 {
             return;
@@ -124,13 +137,33 @@ impl Mesh<'_> {
 
     /// A box in frame `fr`: centre (fwd, left), from z0 to z1, half length `hl`, half width `hw`.
     #[allow(clippy::too_many_arguments)]
-    pub fn bx(&mut self, fr: &Frame, fwd: f32, left: f32, z0: f32, z1: f32, hl: f32, hw: f32, cols: &FaceCols) {
+    pub fn bx(
+        &mut self,
+        fr: &Frame,
+        fwd: f32,
+        left: f32,
+        z0: f32,
+        z1: f32,
+        hl: f32,
+        hw: f32,
+        cols: &FaceCols,
+    ) {
         self.tbox(fr, fwd, left, z0, z1, [hl, hl, hw], [hl, hl, hw], cols);
     }
 
     /// A tapered box: bottom and top given as (front extent, rear extent, half width).
     #[allow(clippy::too_many_arguments)]
-    pub fn tbox(&mut self, fr: &Frame, fwd: f32, left: f32, z0: f32, z1: f32, b: [f32; 3], t: [f32; 3], cols: &FaceCols) {
+    pub fn tbox(
+        &mut self,
+        fr: &Frame,
+        fwd: f32,
+        left: f32,
+        z0: f32,
+        z1: f32,
+        b: [f32; 3],
+        t: [f32; 3],
+        cols: &FaceCols,
+    ) {
         let c = [
             fr.pt(fwd + b[0], left + b[2], z0),
             fr.pt(fwd + b[0], left - b[2], z0),
@@ -147,7 +180,18 @@ impl Mesh<'_> {
     /// A flat regular n-gon plate facing +forward of `fr`, centred at (fwd, left, z), radius r.
     /// `rot` turns the polygon in its plane (radians).
     #[allow(clippy::too_many_arguments)]
-    pub fn plate(&mut self, fr: &Frame, fwd: f32, left: f32, z: f32, r: f32, n: usize, rot: f32, col: [u8; 3], emissive: bool) {
+    pub fn plate(
+        &mut self,
+        fr: &Frame,
+        fwd: f32,
+        left: f32,
+        z: f32,
+        r: f32,
+        n: usize,
+        rot: f32,
+        col: [u8; 3],
+        emissive: bool,
+    ) {
         let normal = [fr.f[0], fr.f[1], 0.0];
         let col = if emissive { col } else { shade(col, normal) };
         let centre = fr.pt(fwd, left, z);
@@ -156,13 +200,24 @@ impl Mesh<'_> {
             fr.pt(fwd, left - r * a.sin(), z + r * a.cos())
         };
         for i in 0..n {
-            self.out.push(Tri3 { p: [centre, vert(i), vert(i + 1)], n: normal, col, emissive, two_sided: false, id: self.id });
+            self.out.push(Tri3 {
+                p: [centre, vert(i), vert(i + 1)],
+                n: normal,
+                col,
+                emissive,
+                two_sided: false,
+                id: self.id,
+            });
         }
     }
 }
 
 fn scale(c: [u8; 3], k: f32) -> [u8; 3] {
-    [(c[0] as f32 * k).min(255.0) as u8, (c[1] as f32 * k).min(255.0) as u8, (c[2] as f32 * k).min(255.0) as u8]
+    [
+        (c[0] as f32 * k).min(255.0) as u8,
+        (c[1] as f32 * k).min(255.0) as u8,
+        (c[2] as f32 * k).min(255.0) as u8,
+    ]
 }
 
 const GLASS: [u8; 3] = [40, 55, 75];
@@ -191,7 +246,17 @@ fn lights(m: &mut Mesh, fr: &Frame, hl: f32, hw: f32, z: f32, braking: bool) {
 
 impl Mesh<'_> {
     #[allow(clippy::too_many_arguments)]
-    fn out_lamp(&mut self, fr: &Frame, fwd: f32, left: f32, z: f32, hw: f32, hh: f32, col: [u8; 3], emissive: bool) {
+    fn out_lamp(
+        &mut self,
+        fr: &Frame,
+        fwd: f32,
+        left: f32,
+        z: f32,
+        hw: f32,
+        hh: f32,
+        col: [u8; 3],
+        emissive: bool,
+    ) {
         let c = [
             fr.pt(fwd + 0.03, left + hw, z - hh),
             fr.pt(fwd + 0.03, left - hw, z - hh),
@@ -245,14 +310,32 @@ pub(crate) fn actor(out: &mut Vec<Tri3>, a: &ActorView, origin: Vec2, id: u32) {
             m.tbox(&fr, 0.0, 0.0, r * 0.7, zb, [hl, hl, hw], [hl - 0.1, hl - 0.05, hw], &all(col));
             // Cabin: sloped windshield and rear window, roof in body colour.
             let cab = [scale(col, 0.95), col, GLASS, GLASS, GLASS, GLASS];
-            m.tbox(&fr, -0.25 * hl, 0.0, zb, h, [0.55 * hl, 0.55 * hl, hw * 0.92], [0.28 * hl, 0.42 * hl, hw * 0.82], &cab);
+            m.tbox(
+                &fr,
+                -0.25 * hl,
+                0.0,
+                zb,
+                h,
+                [0.55 * hl, 0.55 * hl, hw * 0.92],
+                [0.28 * hl, 0.42 * hl, hw * 0.82],
+                &cab,
+            );
             lights(&mut m, &fr, hl - 0.05, hw, zb - 0.15, a.braking);
         }
         ActorKind::Bus => {
             let r = 0.5;
             wheels(&mut m, &fr, hl, hw, r, &[hl - 2.6, -hl + 3.2]);
             m.bx(&fr, 0.0, 0.0, r * 0.6, h * 0.5, hl, hw, &all(col));
-            m.bx(&fr, 0.0, 0.0, h * 0.5, h * 0.86, hl - 0.02, hw - 0.02, &[col, col, GLASS, GLASS, GLASS, GLASS]);
+            m.bx(
+                &fr,
+                0.0,
+                0.0,
+                h * 0.5,
+                h * 0.86,
+                hl - 0.02,
+                hw - 0.02,
+                &[col, col, GLASS, GLASS, GLASS, GLASS],
+            );
             m.bx(&fr, 0.0, 0.0, h * 0.86, h, hl, hw, &all(scale(col, 1.05)));
             lights(&mut m, &fr, hl, hw, h * 0.3, a.braking);
         }
@@ -263,7 +346,16 @@ pub(crate) fn actor(out: &mut Vec<Tri3>, a: &ActorView, origin: Vec2, id: u32) {
             let cab_c = hl - cab_l * 0.5;
             let cab_col = scale(col, 0.8);
             m.bx(&fr, cab_c, 0.0, r * 0.6, h * 0.45, cab_l * 0.5, hw, &all(cab_col));
-            m.tbox(&fr, cab_c, 0.0, h * 0.45, h * 0.85, [cab_l * 0.5, cab_l * 0.5, hw], [cab_l * 0.5 - 0.25, cab_l * 0.5, hw - 0.05], &[cab_col, cab_col, GLASS, GLASS, cab_col, GLASS]);
+            m.tbox(
+                &fr,
+                cab_c,
+                0.0,
+                h * 0.45,
+                h * 0.85,
+                [cab_l * 0.5, cab_l * 0.5, hw],
+                [cab_l * 0.5 - 0.25, cab_l * 0.5, hw - 0.05],
+                &[cab_col, cab_col, GLASS, GLASS, cab_col, GLASS],
+            );
             let box_l = l - cab_l - 0.2;
             m.bx(&fr, -hl + box_l * 0.5, 0.0, r * 1.4, h, box_l * 0.5, hw, &all(scale(col, 1.15)));
             lights(&mut m, &fr, hl, hw, r * 1.6, a.braking);
@@ -276,7 +368,16 @@ pub(crate) fn actor(out: &mut Vec<Tri3>, a: &ActorView, origin: Vec2, id: u32) {
                 m.bx(&fr, x, 0.0, 0.0, 2.0 * r, r, if moto { 0.08 } else { 0.04 }, &all(TYRE));
             }
             let frame_col = if moto { col } else { [60, 60, 66] };
-            m.bx(&fr, 0.0, 0.0, r, r + if moto { 0.45 } else { 0.12 }, wb * 0.8, if moto { 0.18 } else { 0.04 }, &all(frame_col));
+            m.bx(
+                &fr,
+                0.0,
+                0.0,
+                r,
+                r + if moto { 0.45 } else { 0.12 },
+                wb * 0.8,
+                if moto { 0.18 } else { 0.04 },
+                &all(frame_col),
+            );
             rider(&mut m, &fr, -0.15, r + 0.25, h, if moto { [30, 30, 30] } else { col }, true);
         }
         ActorKind::Pedestrian => {
@@ -286,7 +387,8 @@ pub(crate) fn actor(out: &mut Vec<Tri3>, a: &ActorView, origin: Vec2, id: u32) {
             let orange = [255, 110, 20];
             m.bx(&fr, 0.0, 0.0, 0.0, 0.05, hl, hw, &all([30, 30, 30]));
             let t = |z: f32| (hw * 0.8) * (1.0 - z / h) + 0.04;
-            let bands = [(0.05, h * 0.4, orange), (h * 0.4, h * 0.62, [245, 245, 245]), (h * 0.62, h, orange)];
+            let bands =
+                [(0.05, h * 0.4, orange), (h * 0.4, h * 0.62, [245, 245, 245]), (h * 0.62, h, orange)];
             for (z0, z1, c) in bands {
                 m.tbox(&fr, 0.0, 0.0, z0, z1, [t(z0), t(z0), t(z0)], [t(z1), t(z1), t(z1)], &all(c));
             }
@@ -324,15 +426,34 @@ fn rider(m: &mut Mesh, fr: &Frame, fwd: f32, z0: f32, h: f32, shirt: [u8; 3], se
     let torso_top = leg_top + 0.62 * s;
     m.bx(fr, fwd, 0.0, leg_top, torso_top, 0.13 * s, 0.22 * s, &all(shirt));
     for side in [-1.0f32, 1.0] {
-        m.bx(fr, fwd + if seated { 0.15 } else { 0.0 }, side * 0.27 * s, leg_top + 0.12 * s, torso_top - 0.02, 0.06 * s, 0.055 * s, &all(scale(shirt, 0.85)));
+        m.bx(
+            fr,
+            fwd + if seated { 0.15 } else { 0.0 },
+            side * 0.27 * s,
+            leg_top + 0.12 * s,
+            torso_top - 0.02,
+            0.06 * s,
+            0.055 * s,
+            &all(scale(shirt, 0.85)),
+        );
     }
     let head_r = 0.12 * s;
-    m.bx(fr, fwd, 0.0, torso_top + 0.02, torso_top + 0.02 + 2.0 * head_r, head_r, head_r, &[SKIN, [50, 35, 25], SKIN, SKIN, [50, 35, 25], SKIN]);
+    m.bx(
+        fr,
+        fwd,
+        0.0,
+        torso_top + 0.02,
+        torso_top + 0.02 + 2.0 * head_r,
+        head_r,
+        head_r,
+        &[SKIN, [50, 35, 25], SKIN, SKIN, [50, 35, 25], SKIN],
+    );
 }
 
 /// Colour of one lamp slot (0 top red, 1 yellow, 2 green) under a signal state.
 fn lamp(slot: usize, state: LightColor) -> ([u8; 3], bool) {
-    let lit = matches!((slot, state), (0, LightColor::Red) | (1, LightColor::Yellow) | (2, LightColor::Green));
+    let lit =
+        matches!((slot, state), (0, LightColor::Red) | (1, LightColor::Yellow) | (2, LightColor::Green));
     let on = [[255, 30, 20], [255, 200, 0], [30, 255, 90]][slot];
     let off = [[70, 25, 25], [70, 60, 25], [25, 65, 35]][slot];
     if lit {

@@ -9,6 +9,7 @@
 
 mod bev;
 mod camera;
+mod gallery;
 mod image;
 mod map;
 mod mesh;
@@ -16,6 +17,7 @@ mod raster;
 
 pub use bev::BevConfig;
 pub use camera::{CameraConfig, ProjectedActor};
+pub use gallery::write_gallery;
 pub use image::Image;
 pub use map::RenderMap;
 
@@ -51,7 +53,10 @@ impl FrameInput<'_> {
         }
         for l in self.lights {
             if !(l.stop_line.pos.is_finite() && l.stop_line.yaw.is_finite() && l.lane_width_m.is_finite()) {
-                return Err(Error::Render(format!("traffic light {} / lane {} has a non-finite stop line", l.tl_id, l.lane_id)));
+                return Err(Error::Render(format!(
+                    "traffic light {} / lane {} has a non-finite stop line",
+                    l.tl_id, l.lane_id
+                )));
             }
         }
         for s in self.signs {
@@ -113,6 +118,10 @@ pub fn render_bev(map: &RenderMap, frame: &FrameInput, cfg: &BevConfig, out: &mu
 }
 
 /// Every actor the camera sees, with its pixel box, centre, distance and visible fraction.
-pub fn project_actors(map: &RenderMap, frame: &FrameInput, cfg: &CameraConfig) -> Result<Vec<ProjectedActor>> {
+pub fn project_actors(
+    map: &RenderMap,
+    frame: &FrameInput,
+    cfg: &CameraConfig,
+) -> Result<Vec<ProjectedActor>> {
     with_renderer(|r| r.project_actors(map, frame, cfg))
 }

@@ -137,7 +137,15 @@ pub(crate) fn fill_depth(t: &mut Target, d: &mut DepthPlanes, a: SV, b: SV, c: S
 }
 
 /// Stamps the pixels a triangle covers into a mask (no depth), counting newly stamped ones.
-pub(crate) fn fill_mask(mask: &mut [u32], width: usize, height: usize, a: SV, b: SV, c: SV, stamp: u32) -> usize {
+pub(crate) fn fill_mask(
+    mask: &mut [u32],
+    width: usize,
+    height: usize,
+    a: SV,
+    b: SV,
+    c: SV,
+    stamp: u32,
+) -> usize {
     let mut n = 0;
     for_spans(a, b, c, width, height, |y, x0, x1| {
         for m in &mut mask[y * width + x0..y * width + x1] {
