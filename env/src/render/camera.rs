@@ -6,7 +6,7 @@
 
 use super::map::{Mat, RenderMap, N_LAYERS, N_MATS};
 use super::mesh::{self, dot, Frame, Tri3};
-use super::raster::{fill_depth, fill_flat, fill_mask, DepthPlanes, Target, SV};
+use super::raster::{fill_depth, fill_flat, fill_mask, fill_row, pattern, DepthPlanes, Target, SV};
 use super::{FrameInput, Image, Renderer};
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
@@ -119,14 +119,14 @@ impl CameraConfig {
                 return Err(Error::config(f, v, "must be finite"));
             }
         }
-        if !(self.mount_height_m > 0.05) {
+        if self.mount_height_m.is_nan() || self.mount_height_m <= 0.05 {
             return Err(Error::config(
                 "camera.mount_height_m",
                 self.mount_height_m,
                 "must be above the ground (> 0.05)",
             ));
         }
-        if !(self.pitch_deg.abs() < 89.0) {
+        if self.pitch_deg.abs() >= 89.0 {
             return Err(Error::config("camera.pitch_deg", self.pitch_deg, "must be within ±89"));
         }
         if !(self.draw_distance_m > 1.0 && self.draw_distance_m.is_finite()) {
@@ -596,10 +596,7 @@ fn background(cam: &Cam, rgb: &mut [u8]) {
             let dist = cam.pos[2] / -dir[2] * horiz;
             fogged(GRASS.map(|v| v as u8), ((dist - FOG0) / (FOG1 * 1.6 - FOG0)).clamp(0.0, 1.0))
         };
-        let row = &mut rgb[y * w * 3..(y + 1) * w * 3];
-        for px in row.chunks_exact_mut(3) {
-            px.copy_from_slice(&col);
-        }
+        fill_row(&mut rgb[y * w * 3..(y + 1) * w * 3], &pattern(col));
     }
 }
 

@@ -91,6 +91,7 @@ pub(crate) struct Mesh<'a> {
 }
 
 impl Mesh<'_> {
+    #[allow(clippy::too_many_arguments)]
     fn quad(
         &mut self,
         a: [f32; 3],
