@@ -232,3 +232,20 @@ fn surround_rig_sees_an_actor_in_the_back_camera_only() {
         assert_eq!(!p.is_empty(), name == "CAM_BACK", "{name}: {p:?}");
     }
 }
+
+#[test]
+fn gif_writer_writes_frames_and_rejects_size_changes() {
+    let dir = std::env::temp_dir().join(format!("dh_render_gif_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("v.gif");
+    let mut w = dh_env::render::GifWriter::create(&path, 10).unwrap();
+    let mut img = Image::new(32, 18);
+    w.push(&img).unwrap();
+    img.data.iter_mut().for_each(|v| *v = 200);
+    w.push(&img).unwrap();
+    assert!(w.push(&Image::new(16, 16)).is_err());
+    assert_eq!(w.frames(), 2);
+    drop(w);
+    assert!(std::fs::metadata(&path).unwrap().len() > 0);
+    std::fs::remove_dir_all(&dir).ok();
+}

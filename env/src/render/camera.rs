@@ -162,6 +162,7 @@ const SKY_TOP: [f32; 3] = [92.0, 145.0, 215.0];
 const HORIZON: [f32; 3] = [205.0, 215.0, 225.0];
 const GRASS: [f32; 3] = [110.0, 128.0, 88.0];
 const FOG0: f32 = 45.0;
+const MARKING_MAX_M: f32 = 130.0;
 const FOG1: f32 = 260.0;
 
 fn mat_colors() -> [[u8; 3]; N_MATS] {
@@ -436,7 +437,12 @@ impl Renderer {
                 }
                 let mid = [(sg.a[0] + sg.b[0]) * 0.5 - cam.pos[0], (sg.a[1] + sg.b[1]) * 0.5 - cam.pos[1]];
                 let d = (mid[0] * mid[0] + mid[1] * mid[1]).sqrt();
-                let hw = sg.hw.max(d * min_px * 0.5);
+                // Far markings shrink below a pixel and turn into speckle: widen them up to
+                // 60 m, drop them past MARKING_MAX_M.
+                if d > MARKING_MAX_M {
+                    continue;
+                }
+                let hw = sg.hw.max(d.min(60.0) * min_px * 0.5);
                 let (nx, ny) = (-dy / len * hw, dx / len * hw);
                 let q = [
                     cam.to_cam([sg.a[0] - nx, sg.a[1] - ny, 0.0]),
