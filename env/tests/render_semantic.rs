@@ -249,3 +249,33 @@ fn gif_writer_writes_frames_and_rejects_size_changes() {
     assert!(std::fs::metadata(&path).unwrap().len() > 0);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn empty_network_renders_sky_ground_and_actors() {
+    let map = RenderMap::from_parts(&[], &[], &[]);
+    let e = ego();
+    let actors = [actor(1, ActorKind::Car, 10.0, 0.0)];
+    let mut img = Image::default();
+    let cfg = CameraConfig { width: 160, height: 90, ..CameraConfig::front() };
+    render_camera(&map, &frame(&e, &actors, &[], &[]), &cfg, &mut img).unwrap();
+    let p = project_actors(&map, &frame(&e, &actors, &[], &[]), &cfg).unwrap();
+    assert_eq!(p.len(), 1);
+    render_bev(&map, &frame(&e, &actors, &[], &[]), &BevConfig::rl(), &mut img).unwrap();
+    assert_eq!(img.pixel(64, 64).unwrap(), [255, 215, 0]);
+}
+
+#[test]
+fn real_net_builds_fast_when_present() {
+    let path = Path::new("../../shared/official/Close_Loop_Evaluation/Carla_Simulation/Co-Simulation/Sumo/tongji/tongji.net.xml");
+    if !path.exists() {
+        eprintln!("skipping: {} not present", path.display());
+        return;
+    }
+    let net = Network::from_file(path).unwrap();
+    let t = std::time::Instant::now();
+    let map = RenderMap::build(&net);
+    let (tris, segs, props) = map.stats();
+    assert!(tris > 10_000 && segs > 5_000 && props > 0, "{:?}", map.stats());
+    // Debug builds are slower; the release figure is ~70 ms.
+    assert!(t.elapsed().as_secs_f64() < 10.0);
+}
