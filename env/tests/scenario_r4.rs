@@ -260,8 +260,11 @@ fn drive(s: &ResolvedScenario, careful: bool, bridge: bool) -> Outcome {
         let r = w.tick(&c).unwrap();
         let contacts: Vec<Contact> =
             r.contacts.iter().map(|&(actor_id, class)| Contact { actor_id, class }).collect();
-        let tick =
-            TickInput { contacts: &contacts, ..TickInput::new(r.ego.pose.pos, r.ego.speed_mps, r.on_road) };
+        let tick = TickInput {
+            contacts: &contacts,
+            red_light: r.ran_red_light,
+            ..TickInput::new(r.ego.pose.pos, r.ego.speed_mps, r.on_road)
+        };
         if let Some(t) = tracker.update(&tick) {
             let score = tracker.finish(&RunInfo { scene_id: s.id.clone(), ..Default::default() });
             let reason = match contacts.first() {
