@@ -323,3 +323,12 @@ fn running_the_red_light_is_reported() {
     assert_eq!(reports.len(), 1);
     assert!(reports[0].0 < 109.6 && reports[0].1 >= 109.6, "{reports:?}");
 }
+
+#[test]
+fn core_types_are_send() {
+    fn send<T: Send>() {}
+    fn send_sync<T: Send + Sync>() {}
+    send::<World>();
+    send_sync::<ResolvedScenario>();
+    send_sync::<TickReport>();
+}
