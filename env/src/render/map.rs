@@ -137,7 +137,7 @@ pub(crate) fn offset_polyline(pts: &[Vec2], d: f64) -> Vec<Vec2> {
 pub(crate) fn triangulate(poly: &[Vec2]) -> Vec<[Vec2; 3]> {
     let mut pts: Vec<Vec2> = Vec::with_capacity(poly.len());
     for &p in poly {
-        if pts.last().map_or(true, |q: &Vec2| q.dist_sq(p) > 1e-8) {
+        if pts.last().is_none_or(|q: &Vec2| q.dist_sq(p) > 1e-8) {
             pts.push(p);
         }
     }
@@ -255,7 +255,7 @@ impl Occupancy {
         }
     }
     fn any(&self, pts: &[Vec2]) -> bool {
-        pts.iter().any(|p| self.idx(*p).map_or(true, |i| self.bits[i]))
+        pts.iter().any(|p| self.idx(*p).is_none_or(|i| self.bits[i]))
     }
     fn mark(&mut self, pts: &[Vec2]) {
         for p in pts {
