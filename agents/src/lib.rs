@@ -1,1 +1,2 @@
 //! `dh-agents`: policies that must be fast or fuzzable.
+pub mod expert;
