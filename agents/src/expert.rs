@@ -47,6 +47,10 @@ pub struct ExpertParams {
     pub decision_period_s: f64,
     /// Decisions ahead over which steer reachability is enforced (pre-steering).
     pub presteer_decisions: usize,
+    /// Decisions simulated when choosing the steer among the reachable ones (0 = plain base law),
+    /// and the weight (m) of the heading error against the lateral error in that rollout.
+    pub rollout_decisions: usize,
+    pub rollout_heading_weight_m: f64,
     /// Steer-rate curve bound uses this fraction of the bridge's steer rate (headroom for
     /// tracking corrections).
     pub steer_rate_usage: f64,
@@ -101,6 +105,8 @@ impl Default for ExpertParams {
             decision_period_s: 0.25,
             presteer_decisions: 8,
             steer_rate_usage: 0.7,
+            rollout_decisions: 10,
+            rollout_heading_weight_m: 2.0,
             corridor_margin_m: 0.5,
             stop_gap_m: 3.5,
             light_stop_margin_m: 4.0,
@@ -159,6 +165,7 @@ impl ExpertParams {
             ("creep_speed_mps", self.creep_speed_mps),
             ("creep_min_gap_m", self.creep_min_gap_m),
             ("avoid_ramp_per_mps", self.avoid_ramp_per_mps),
+            ("rollout_heading_weight_m", self.rollout_heading_weight_m),
         ];
         for (field, v) in non_negative {
             if !(v.is_finite() && v >= 0.0) {
@@ -301,6 +308,9 @@ pub struct Expert {
     s_hint: Option<f64>,
     rest_time_s: f64,
     detour: Option<Detour>,
+    /// Allowed speed per metre ahead of `envelope_s0` (curves only), from the last decision.
+    envelope: Vec<f64>,
+    envelope_s0: f64,
 }
 
 /// Route point at arc `s`, extrapolated along the end headings beyond the ends.
@@ -355,7 +365,15 @@ impl Expert {
     /// Builds an expert; the parameters are checked by [`ExpertParams::validate`].
     pub fn new(params: ExpertParams) -> dh_env::Result<Self> {
         params.validate()?;
-        Ok(Self { params, last_steer: 0.0, s_hint: None, rest_time_s: 0.0, detour: None })
+        Ok(Self {
+            params,
+            last_steer: 0.0,
+            s_hint: None,
+            rest_time_s: 0.0,
+            detour: None,
+            envelope: Vec::new(),
+            envelope_s0: 0.0,
+        })
     }
 
     pub fn params(&self) -> &ExpertParams {
@@ -368,6 +386,7 @@ impl Expert {
         self.s_hint = None;
         self.rest_time_s = 0.0;
         self.detour = None;
+        self.envelope.clear();
     }
 
     /// One decision. Never panics; degenerate input (empty route, non-finite ego state) yields
@@ -482,46 +501,100 @@ impl Expert {
         out
     }
 
-    fn steer(&self, input: &ExpertInput<'_>, s_ego: f64, v: f64) -> f64 {
+    /// The base lateral law: pure pursuit from the pose predicted `steer_preview_s` ahead, kept
+    /// inside the pre-steer reachability window and the bridge's rate limit around `last`.
+    /// `v` is the ego speed, `v_plan` the speed the lookahead is sized for.
+    fn base_steer(&self, route: &Polyline, pose: Pose, v: f64, v_plan: f64, s_hint: f64, last: f64) -> f64 {
         let p = &self.params;
-        let route = input.route;
         let rate = p.steer_rate_per_decision;
-        let pose = self.predict_pose(
-            input.ego.pose,
-            input.ego.speed_mps.max(0.0),
-            self.last_steer,
-            p.steer_preview_s,
-        );
+        let pose = self.predict_pose(pose, v, last, p.steer_preview_s);
         let rear = pose.pos - pose.forward() * p.rear_to_center_m;
-        let s_rear = project_window(route, rear, s_ego - 10.0, s_ego + 10.0).map_or(s_ego, |pr| pr.s);
-        let mut u = self.pursuit(route, pose, s_rear, v);
+        let s_rear = project_window(route, rear, s_hint - 10.0, s_hint + 10.0).map_or(s_hint, |pr| pr.s);
+        let mut u = self.pursuit(route, pose, s_rear, v_plan);
         // Pre-steer: how the steer an on-path car needs changes over the next decisions, added to
         // the current pursuit command, must stay reachable from this one under the rate limit.
         let on_path = |s: f64| {
             let yaw = (self.path_point(route, s + 1.0) - self.path_point(route, s - 1.0)).angle();
             let pos = self.path_point(route, s) + Vec2::from_angle(yaw) * p.rear_to_center_m;
-            self.pursuit(route, Pose::new(pos, yaw), s, v)
+            self.pursuit(route, Pose::new(pos, yaw), s, v_plan)
         };
         let u0 = on_path(s_rear);
         let (mut lo, mut hi) = (-1.0f64, 1.0f64);
         for k in 1..=p.presteer_decisions {
-            let s_k = s_rear + v * p.decision_period_s * k as f64;
+            let s_k = s_rear + v_plan * p.decision_period_s * k as f64;
             let u_k = (u + on_path(s_k) - u0).clamp(-1.0, 1.0);
             let reach = rate * k as f64;
             lo = lo.max(u_k - reach);
             hi = hi.min(u_k + reach);
         }
-        if lo <= hi {
-            u = u.clamp(lo, hi);
-        } else {
-            u = 0.5 * (lo + hi);
-        }
-        let u = u.clamp(self.last_steer - rate, self.last_steer + rate).clamp(-1.0, 1.0);
+        u = if lo <= hi { u.clamp(lo, hi) } else { 0.5 * (lo + hi) };
+        let u = u.clamp(last - rate, last + rate).clamp(-1.0, 1.0);
         if u.is_finite() {
             u
         } else {
-            self.last_steer
+            last
         }
+    }
+
+    /// Tracking cost of holding `first` for one decision, then following the base law, over
+    /// `rollout_decisions` decisions at the current speed: squared lateral and (scaled) heading
+    /// errors against the pursued path, sampled every 2 ticks.
+    fn rollout_cost(&self, route: &Polyline, ego: Pose, v: f64, v_plan: f64, s_ego: f64, first: f64) -> f64 {
+        let p = &self.params;
+        const SUB: usize = 2;
+        let dt = p.decision_period_s / SUB as f64;
+        let (mut pose, mut s_hint, mut u) = (ego, s_ego, first);
+        let mut cost = 0.0;
+        let half_len = p.wheelbase_m * 0.5 + 0.85;
+        let mut v = v;
+        for k in 0..p.rollout_decisions {
+            if k > 0 {
+                u = self.base_steer(route, pose, v, v_plan.min(v.max(1.0)), s_hint, u);
+            }
+            for _ in 0..SUB {
+                // The car slows for bends ahead as the speed planner will make it.
+                let i = (s_hint + half_len - self.envelope_s0).max(0.0) as usize;
+                if let Some(cap) = self.envelope.get(i).or(self.envelope.last()) {
+                    v = v.min(cap.max(1.0));
+                }
+                pose = self.predict_pose(pose, v, u, dt);
+                let Some(pr) = project_window(route, pose.pos, s_hint - 5.0, s_hint + 5.0 + 2.0 * v * dt)
+                else {
+                    return f64::INFINITY;
+                };
+                s_hint = pr.s;
+                let lat = pr.lateral - self.offset_at(pr.s);
+                let dh = wrap_angle(pose.yaw - route_heading(route, pr.s));
+                // Beyond 0.5 m the error grows steeply: swinging wide into the next lane to
+                // ease a bend is worse than cutting it a little.
+                let excess = (lat.abs() - 0.5).max(0.0);
+                cost += lat * lat + 20.0 * excess * excess + (p.rollout_heading_weight_m * dh.sin()).powi(2);
+            }
+        }
+        cost
+    }
+
+    fn steer(&self, input: &ExpertInput<'_>, s_ego: f64, v_plan: f64) -> f64 {
+        let p = &self.params;
+        let route = input.route;
+        let v = input.ego.speed_mps.max(0.0);
+        let last = self.last_steer;
+        let base = self.base_steer(route, input.ego.pose, v, v_plan, s_ego, last);
+        if p.rollout_decisions == 0 || v < 0.5 {
+            return base;
+        }
+        // Rollout improvement of the base law: try the reachable steers around the last one and
+        // keep the one whose continuation tracks the path best; ties favour the base command.
+        let rate = p.steer_rate_per_decision;
+        let mut best = (self.rollout_cost(route, input.ego.pose, v, v_plan, s_ego, base) * 0.98, base);
+        for i in -3i32..=3 {
+            let u = (last + rate * i as f64 / 3.0).clamp(-1.0, 1.0);
+            let c = self.rollout_cost(route, input.ego.pose, v, v_plan, s_ego, u);
+            if c < best.0 {
+                best = (c, u);
+            }
+        }
+        best.1
     }
 
     /// Path curvature magnitude at arc `s` (heading change over ±w).
@@ -534,8 +607,10 @@ impl Expert {
 
     /// Highest speed at which the steer needed around arc `s` is reachable in time and the
     /// lateral acceleration stays bounded.
-    fn curve_speed_profile(&self, route: &Polyline, s_front: f64, v: f64) -> (f64, bool) {
-        let p = &self.params;
+    /// Also stores the braking envelope (allowed speed per metre ahead of the front) for the
+    /// steering rollout.
+    fn curve_speed_profile(&mut self, route: &Polyline, s_front: f64, v: f64) -> (f64, bool) {
+        let p = self.params.clone();
         let horizon = (v * v / (2.0 * p.comfort_decel_mps2) + 25.0).clamp(30.0, 150.0);
         let ds = 1.0;
         let n = (horizon / ds) as usize;
@@ -545,6 +620,7 @@ impl Expert {
         let ks: Vec<f64> =
             (0..=n).map(|i| self.curvature(route, s_front + i as f64 * ds).min(kappa_max)).collect();
         let rate = p.steer_rate_usage * p.steer_rate_per_decision / p.decision_period_s;
+        let mut envelope = Vec::with_capacity(ks.len());
         const SPAN: usize = 4;
         for (i, &k) in ks.iter().enumerate() {
             let d = i as f64 * ds;
@@ -559,7 +635,13 @@ impl Expert {
             }
             let room = (d - v * p.decision_period_s).max(0.0);
             best = best.min((v_here * v_here + 2.0 * p.comfort_decel_mps2 * room).sqrt());
+            envelope.push(v_here);
         }
+        for i in (0..envelope.len().saturating_sub(1)).rev() {
+            envelope[i] = envelope[i].min((envelope[i + 1].powi(2) + 2.0 * p.comfort_decel_mps2 * ds).sqrt());
+        }
+        self.envelope = envelope;
+        self.envelope_s0 = s_front;
         (best, best.is_finite())
     }
 
@@ -576,7 +658,14 @@ impl Expert {
                 reason = SpeedReason::SpeedLimit;
             }
         }
-        let (v_curve, finite) = self.curve_speed_profile(route, s_front, v);
+        let (mut v_curve, finite) = self.curve_speed_profile(route, s_front, v);
+        // While the wheel is still turned (e.g. recovering after a sharp bend) the car drives on
+        // that curvature: do not accelerate past the lateral limit for it.
+        let delta = self.steer_to_wheel(self.last_steer).abs();
+        let kappa_now =
+            (p.rear_to_center_m / p.wheelbase_m * delta.tan()).atan().sin() / p.rear_to_center_m.max(0.1);
+        v_curve =
+            v_curve.min((p.max_lat_accel_mps2 / kappa_now.max(1e-6)).sqrt().max(v.min(p.cruise_speed_mps)));
         if finite && v_curve < target {
             target = v_curve;
             reason = SpeedReason::Curve;
