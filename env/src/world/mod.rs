@@ -1,1 +1,489 @@
-//! world (in progress)
+//! The R4 world and its tick pipeline (fixed [`DT_S`] = 0.05 s):
+//!
+//! 1. check and clamp the ego [`Control`];
+//! 2. advance the ego (kinematic bicycle, [`vehicle`]);
+//! 3. advance time;
+//! 4. traffic lights ([`lights`]);
+//! 5. actors in id order (triggers, scripted paths, brake events);
+//! 6. collisions (rapier2d, [`collision`]);
+//! 7. off-road test at the ego centre.
+//!
+//! One [`World::tick`] returns all of it as a [`TickReport`].
+//!
+//! Ids: the ego is id 0; scenario `actors` get 1..=n in file order, then `obstacles` in file
+//! order, then actors spawned at run time ([`World::spawn_external`]). [`World::actors`]
+//! excludes the ego and removed actors and is sorted by id.
+//!
+//! Deterministic: no hash-map iteration, fixed order, no randomness (the seed is kept for
+//! behaviours that will need it).
+
+pub mod collision;
+pub mod lights;
+pub mod vehicle;
+
+pub use lights::{signal_heads, LightState, SignalHead};
+pub use vehicle::{longitudinal_accel, sanitize_control, step_bicycle, EgoState, VehicleParams};
+
+use crate::geom::{Pose, Vec2};
+use crate::map::Network;
+use crate::scenario::{ActorMotion, AtEnd, BrakeEvent, BrakeWhen, ResolvedScenario, ScriptedPath, Trigger};
+use crate::view::{ActorKind, ActorView, ContactClass, LightColor, SignView, TrafficLightView};
+use crate::{Error, Result, DT_S};
+use collision::CollisionWorld;
+use rapier2d::prelude::ColliderHandle;
+use serde::{Deserialize, Serialize};
+use std::sync::Arc;
+pub use vehicle::Control;
+
+/// Id of the ego in views and contacts.
+pub const EGO_ID: u32 = 0;
+
+/// An actor added at run time whose pose the caller drives ([`World::set_external_pose`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ExternalSpawn {
+    pub kind: ActorKind,
+    pub length_m: f64,
+    pub width_m: f64,
+    pub height_m: f64,
+    pub color: [u8; 3],
+    pub pose: Pose,
+    pub speed_mps: f64,
+}
+
+/// Everything about one tick.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TickReport {
+    /// Number of ticks done, this one included (1 after the first tick).
+    pub tick: u64,
+    /// Sim time at the end of the tick = tick · DT_S.
+    pub time_s: f64,
+    pub ego: ActorView,
+    /// Ego state with acceleration, steering angle and yaw rate of this tick.
+    pub ego_state: EgoState,
+    /// Actors overlapping the ego at the end of the tick, by id, with the protocol's class.
+    pub contacts: Vec<(u32, ContactClass)>,
+    /// Ego centre on a drivable lane or junction.
+    pub on_road: bool,
+    /// Actors whose start trigger fired during this tick.
+    pub triggered: Vec<u32>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Phase {
+    Waiting,
+    Moving,
+    Braking,
+    Holding { until_s: f64 },
+    Done,
+}
+
+#[derive(Debug, Clone)]
+enum Motion {
+    Static,
+    Scripted(Box<ScriptedPath>),
+    External,
+}
+
+#[derive(Debug, Clone)]
+struct ActorRt {
+    view: ActorView,
+    motion: Motion,
+    collider: ColliderHandle,
+    s: f64,
+    phase: Phase,
+    triggered_at_s: f64,
+    brake_pending: bool,
+    /// Removed from the world (end of path with `at_end = remove`, or despawned).
+    removed: bool,
+}
+
+/// The simulated world of one episode.
+#[derive(Debug)]
+pub struct World {
+    map: Arc<Network>,
+    params: VehicleParams,
+    seed: u64,
+    ego: EgoState,
+    ego_view: ActorView,
+    actors: Vec<ActorRt>,
+    views: Vec<ActorView>,
+    lights: LightState,
+    signs: Vec<SignView>,
+    tick: u64,
+    collision: CollisionWorld,
+    contact_ids: Vec<u32>,
+}
+
+/// Smooth heading along a path: direction of the chord over ±`h` around `s`.
+fn path_pose(path: &crate::geom::Polyline, s: f64, h: f64) -> Pose {
+    let p = path.point_at(s);
+    let len = path.length();
+    let a = path.point_at((s - h).max(0.0));
+    let b = path.point_at((s + h).min(len));
+    let d = b - a;
+    let yaw = if d.norm_sq() > 1e-12 { d.angle() } else { path.heading_at(s) };
+    Pose::new(p, yaw)
+}
+
+fn smoothing_m(length_m: f64) -> f64 {
+    (0.25 * length_m).clamp(0.25, 2.0)
+}
+
+impl World {
+    /// Builds the world at t = 0 from a resolved scenario.
+    pub fn new(scenario: &ResolvedScenario, seed: u64) -> Result<World> {
+        let params = scenario.ego.params;
+        params.validate()?;
+        let ego = EgoState::new(scenario.ego.start, scenario.ego.speed_mps);
+        let ego_view = ActorView {
+            id: EGO_ID,
+            kind: ActorKind::Car,
+            pose: ego.pose,
+            speed_mps: ego.speed_mps,
+            length_m: params.length_m,
+            width_m: params.width_m,
+            height_m: params.height_m,
+            color: scenario.ego.color,
+            braking: false,
+        };
+        let mut collision = CollisionWorld::new(ego.pose.pos, ego.pose, params.length_m, params.width_m);
+        let mut actors = Vec::with_capacity(scenario.actors.len());
+        for (i, a) in scenario.actors.iter().enumerate() {
+            let id = u32::try_from(i + 1).map_err(|_| Error::Simulation("too many actors".into()))?;
+            let (pose, motion) = match &a.motion {
+                ActorMotion::Static { pose } => (*pose, Motion::Static),
+                ActorMotion::External { pose } => (*pose, Motion::External),
+                ActorMotion::Scripted(p) => {
+                    (path_pose(&p.path, 0.0, smoothing_m(a.length_m)), Motion::Scripted(Box::new(p.clone())))
+                }
+            };
+            let view = ActorView {
+                id,
+                kind: a.kind,
+                pose,
+                speed_mps: 0.0,
+                length_m: a.length_m,
+                width_m: a.width_m,
+                height_m: a.height_m,
+                color: a.color,
+                braking: false,
+            };
+            let brake_pending = matches!(&motion, Motion::Scripted(p) if p.brake.is_some());
+            let collider = collision.add_actor(id, pose, a.length_m, a.width_m);
+            actors.push(ActorRt {
+                view,
+                motion,
+                collider,
+                s: 0.0,
+                phase: Phase::Waiting,
+                triggered_at_s: 0.0,
+                brake_pending,
+                removed: false,
+            });
+        }
+        let mut w = World {
+            map: scenario.map.clone(),
+            params,
+            seed,
+            ego,
+            ego_view,
+            views: Vec::with_capacity(actors.len()),
+            actors,
+            lights: LightState::new(&scenario.map),
+            signs: scenario.signs.clone(),
+            tick: 0,
+            collision,
+            contact_ids: Vec::with_capacity(8),
+        };
+        w.rebuild_views();
+        Ok(w)
+    }
+
+    fn rebuild_views(&mut self) {
+        self.views.clear();
+        self.views.extend(self.actors.iter().filter(|a| !a.removed).map(|a| a.view));
+    }
+
+    /// Advances the world by one tick under `control` (NaN/∞ → error; values clamped to range).
+    pub fn tick(&mut self, control: &Control) -> Result<TickReport> {
+        let c = sanitize_control(control)?;
+        // 2. Ego.
+        let prev_speed = self.ego.speed_mps;
+        self.ego = step_bicycle(&self.params, &self.ego, &c, DT_S);
+        self.ego_view.pose = self.ego.pose;
+        self.ego_view.speed_mps = self.ego.speed_mps;
+        self.ego_view.braking = c.brake > 0.0 && prev_speed > 0.0;
+        // 3. Time.
+        self.tick += 1;
+        let t = self.time_s();
+        // 4. Lights.
+        self.lights.update(t);
+        // 5. Actors.
+        let mut triggered = Vec::new();
+        let ego_pos = self.ego.pose.pos;
+        let mut any_removed = false;
+        for a in &mut self.actors {
+            if a.removed {
+                continue;
+            }
+            let Motion::Scripted(p) = &a.motion else { continue };
+            let before = a.view.pose;
+            if step_scripted(
+                a.view.id,
+                &mut a.view,
+                &mut a.s,
+                &mut a.phase,
+                &mut a.triggered_at_s,
+                &mut a.brake_pending,
+                p,
+                t,
+                ego_pos,
+                &mut triggered,
+            ) {
+                a.removed = true;
+                any_removed = true;
+                self.collision.set_enabled(a.collider, false);
+            } else if a.view.pose != before {
+                self.collision.set_pose(a.collider, a.view.pose);
+            }
+        }
+        if any_removed {
+            self.rebuild_views();
+        } else {
+            for (view, a) in self.views.iter_mut().zip(self.actors.iter().filter(|a| !a.removed)) {
+                *view = a.view;
+            }
+        }
+        // 6. Collisions.
+        self.collision.set_ego_pose(self.ego.pose);
+        self.contact_ids.clear();
+        self.collision.ego_contacts(&mut self.contact_ids);
+        let contacts = self
+            .contact_ids
+            .iter()
+            .filter_map(|&id| self.actor_index(id).map(|i| (id, self.actors[i].view.kind.contact_class())))
+            .collect();
+        // 7. Off-road.
+        let on_road = self.map.drivable().is_drivable(ego_pos);
+        Ok(TickReport {
+            tick: self.tick,
+            time_s: t,
+            ego: self.ego_view,
+            ego_state: self.ego,
+            contacts,
+            on_road,
+            triggered,
+        })
+    }
+
+    fn actor_index(&self, id: u32) -> Option<usize> {
+        let i = (id as usize).checked_sub(1)?;
+        (i < self.actors.len()).then_some(i)
+    }
+
+    /// Sets the pose and speed of an `external` actor (SUMO co-simulation hook).
+    pub fn set_external_pose(&mut self, id: u32, pose: Pose, speed_mps: f64) -> Result<()> {
+        let i = self.actor_index(id).ok_or_else(|| Error::config("actor_id", id, "no such actor"))?;
+        if !matches!(self.actors[i].motion, Motion::External) || self.actors[i].removed {
+            return Err(Error::config("actor_id", id, "not an active external actor"));
+        }
+        if !(pose.pos.is_finite() && pose.yaw.is_finite()) {
+            return Err(Error::config("pose", format!("{pose:?}"), "must be finite"));
+        }
+        if !(speed_mps.is_finite() && speed_mps >= 0.0) {
+            return Err(Error::config("speed_mps", speed_mps, "must be a finite number ≥ 0"));
+        }
+        let a = &mut self.actors[i];
+        a.view.braking = speed_mps < a.view.speed_mps - 1e-3;
+        a.view.pose = pose;
+        a.view.speed_mps = speed_mps;
+        let (h, view) = (a.collider, a.view);
+        self.collision.set_pose(h, pose);
+        if let Some(v) = self.views.iter_mut().find(|v| v.id == id) {
+            *v = view;
+        }
+        Ok(())
+    }
+
+    /// Adds an external actor at run time (e.g. a SUMO background vehicle); returns its id.
+    pub fn spawn_external(&mut self, spawn: &ExternalSpawn) -> Result<u32> {
+        let ExternalSpawn { kind, length_m, width_m, height_m, color, pose, speed_mps } = *spawn;
+        for (n, v) in [("length_m", length_m), ("width_m", width_m), ("height_m", height_m)] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(Error::config(n, v, "must be a finite number > 0"));
+            }
+        }
+        if !(pose.pos.is_finite() && pose.yaw.is_finite() && speed_mps.is_finite() && speed_mps >= 0.0) {
+            return Err(Error::config(
+                "pose",
+                format!("{pose:?} at {speed_mps} m/s"),
+                "must be finite, speed ≥ 0",
+            ));
+        }
+        let id =
+            u32::try_from(self.actors.len() + 1).map_err(|_| Error::Simulation("too many actors".into()))?;
+        let view =
+            ActorView { id, kind, pose, speed_mps, length_m, width_m, height_m, color, braking: false };
+        let collider = self.collision.add_actor(id, pose, length_m, width_m);
+        self.actors.push(ActorRt {
+            view,
+            motion: Motion::External,
+            collider,
+            s: 0.0,
+            phase: Phase::Moving,
+            triggered_at_s: self.time_s(),
+            brake_pending: false,
+            removed: false,
+        });
+        self.views.push(view);
+        Ok(id)
+    }
+
+    /// Removes an actor (its collider too); ids are never reused.
+    pub fn remove_actor(&mut self, id: u32) -> Result<()> {
+        let i = self.actor_index(id).ok_or_else(|| Error::config("actor_id", id, "no such actor"))?;
+        if !self.actors[i].removed {
+            self.actors[i].removed = true;
+            self.collision.set_enabled(self.actors[i].collider, false);
+            self.rebuild_views();
+        }
+        Ok(())
+    }
+
+    /// Active actors (ego excluded), sorted by id.
+    pub fn actors(&self) -> &[ActorView] {
+        &self.views
+    }
+    pub fn ego(&self) -> &ActorView {
+        &self.ego_view
+    }
+    pub fn ego_state(&self) -> &EgoState {
+        &self.ego
+    }
+    pub fn vehicle_params(&self) -> &VehicleParams {
+        &self.params
+    }
+    /// Signal heads, one per (light, controlled incoming lane), sorted by light id then lane.
+    pub fn lights(&self) -> &[TrafficLightView] {
+        self.lights.views()
+    }
+    /// Exact colour of one controlled link (`tl_id`, SUMO link index).
+    pub fn link_color(&self, tl_id: &str, link_index: usize) -> Option<LightColor> {
+        self.lights.link_color(tl_id, link_index)
+    }
+    /// Colour governing the connection `from_lane` → `to_lane` (None if not signalised).
+    pub fn connection_color(&self, from_lane: usize, to_lane: usize) -> Option<LightColor> {
+        self.map.connections_from_lane(from_lane).iter().map(|&ci| &self.map.connections[ci]).find_map(|c| {
+            if c.to_lane != to_lane {
+                return None;
+            }
+            self.lights.link_color(c.tl.as_deref()?, c.link_index?)
+        })
+    }
+    pub fn signs(&self) -> &[SignView] {
+        &self.signs
+    }
+    pub fn map(&self) -> &Arc<Network> {
+        &self.map
+    }
+    pub fn time_s(&self) -> f64 {
+        self.tick as f64 * DT_S
+    }
+    pub fn tick_count(&self) -> u64 {
+        self.tick
+    }
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+}
+
+/// One scripted-actor step; returns true when the actor leaves the world.
+#[allow(clippy::too_many_arguments)]
+fn step_scripted(
+    id: u32,
+    view: &mut ActorView,
+    s: &mut f64,
+    phase: &mut Phase,
+    triggered_at_s: &mut f64,
+    brake_pending: &mut bool,
+    p: &ScriptedPath,
+    t: f64,
+    ego_pos: Vec2,
+    triggered: &mut Vec<u32>,
+) -> bool {
+    let prev_speed = view.speed_mps;
+    if *phase == Phase::Waiting {
+        let fire = match p.trigger {
+            Trigger::Time(t0) => t >= t0 - 1e-9,
+            Trigger::EgoWithin { radius_m, point } => ego_pos.dist_sq(point) <= radius_m * radius_m,
+        };
+        if !fire {
+            return false;
+        }
+        triggered.push(id);
+        *phase = Phase::Moving;
+        *triggered_at_s = t;
+        view.speed_mps = p.initial_speed_mps;
+    }
+    // Brake event.
+    if *brake_pending && *phase == Phase::Moving {
+        if let Some(BrakeEvent { when, .. }) = p.brake {
+            let due = match when {
+                BrakeWhen::AtS(at) => *s >= at,
+                BrakeWhen::AfterS(dt) => t - *triggered_at_s >= dt - 1e-9,
+            };
+            if due {
+                *brake_pending = false;
+                *phase = Phase::Braking;
+            }
+        }
+    }
+    let mut v = view.speed_mps;
+    match *phase {
+        Phase::Braking => {
+            let b = p.brake.unwrap_or(BrakeEvent {
+                when: BrakeWhen::AtS(0.0),
+                decel_mps2: 1.0,
+                to_speed_mps: 0.0,
+                hold_s: None,
+            });
+            v = (v - b.decel_mps2 * DT_S).max(b.to_speed_mps);
+            if v <= b.to_speed_mps {
+                *phase = match b.hold_s {
+                    Some(h) => Phase::Holding { until_s: t + h },
+                    None => Phase::Holding { until_s: f64::INFINITY },
+                };
+            }
+        }
+        Phase::Holding { until_s } => {
+            if t >= until_s {
+                *phase = Phase::Moving;
+            }
+        }
+        Phase::Moving => {
+            let target = p.leg_speed(*s);
+            let dv = p.accel_mps2 * DT_S;
+            v = if v < target { (v + dv).min(target) } else { (v - dv).max(target) };
+        }
+        Phase::Waiting | Phase::Done => {}
+    }
+    if *phase == Phase::Done {
+        v = 0.0;
+    }
+    let len = p.path.length();
+    *s += v * DT_S;
+    if *s >= len {
+        *s = len;
+        if *phase != Phase::Done {
+            *phase = Phase::Done;
+            if p.at_end == AtEnd::Remove {
+                return true;
+            }
+        }
+        v = 0.0;
+    }
+    view.speed_mps = v;
+    view.braking = v < prev_speed - 1e-9;
+    view.pose = path_pose(&p.path, *s, smoothing_m(view.length_m));
+    false
+}

@@ -1,0 +1,254 @@
+//! Scenario file v1: the serde schema exactly as written in TOML (see `docs/scenario-format.md`).
+//!
+//! Every table rejects unknown keys. Alternatives (a place given by lane or by coordinates, a
+//! trigger by time or by distance) are flat optional fields checked by the resolver, so errors
+//! can say precisely which field is wrong instead of "no variant matched".
+
+use crate::view::{ActorKind, SignKind};
+use crate::world::VehicleParams;
+use serde::{Deserialize, Serialize};
+
+/// Highest schema version this build reads.
+pub const SCENARIO_VERSION: u32 = 1;
+
+/// The ten R4 categories of PROTOCOL.md §2.6, as written in `category` and used as folder names.
+pub const CATEGORIES: [&str; 10] = [
+    "01_pedestrian",
+    "02_obstacles",
+    "03_turning",
+    "04_intersection",
+    "05_t_intersection",
+    "06_traffic_flow",
+    "07_sudden_brake",
+    "08_merging",
+    "09_yielding",
+    "10_roundabout",
+];
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioFile {
+    pub version: u32,
+    pub id: String,
+    #[serde(default)]
+    pub name: Option<String>,
+    pub category: String,
+    #[serde(default)]
+    pub description: String,
+    /// Path relative to the scenario file, or `sumo:<path under SUMO_HOME>`.
+    pub map: String,
+    #[serde(default)]
+    pub reference_duration_s: Option<f64>,
+    #[serde(default)]
+    pub seed: u64,
+    pub ego: EgoSpec,
+    #[serde(default)]
+    pub obstacles: Vec<ObstacleSpec>,
+    #[serde(default)]
+    pub actors: Vec<ActorSpec>,
+    #[serde(default)]
+    pub signs: Vec<SignSpec>,
+}
+
+/// A point (and optionally a heading) either on a lane (`lane` + `s` + `offset_m`) or in
+/// network coordinates (`x`, `y`). `offset_m` > 0 is left of the lane direction;
+/// `yaw_deg` (counter-clockwise from east) overrides the lane heading.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlaceSpec {
+    #[serde(default)]
+    pub lane: Option<String>,
+    #[serde(default)]
+    pub s: Option<f64>,
+    #[serde(default)]
+    pub offset_m: Option<f64>,
+    #[serde(default)]
+    pub x: Option<f64>,
+    #[serde(default)]
+    pub y: Option<f64>,
+    #[serde(default)]
+    pub yaw_deg: Option<f64>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EgoSpec {
+    #[serde(default)]
+    pub start: Option<PlaceSpec>,
+    #[serde(default)]
+    pub destination: Option<PlaceSpec>,
+    /// Edges the route must pass, in order; gaps are filled by shortest-path routing.
+    #[serde(default)]
+    pub route_edges: Option<Vec<String>>,
+    #[serde(default)]
+    pub speed_mps: f64,
+    #[serde(default)]
+    pub color: Option<[u8; 3]>,
+    /// Overrides of the vehicle parameters (dimensions and dynamics).
+    #[serde(default)]
+    pub vehicle: Option<VehicleParams>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObstacleSpec {
+    #[serde(default)]
+    pub name: Option<String>,
+    pub kind: ActorKind,
+    pub at: PlaceSpec,
+    #[serde(default)]
+    pub length_m: Option<f64>,
+    #[serde(default)]
+    pub width_m: Option<f64>,
+    #[serde(default)]
+    pub height_m: Option<f64>,
+    #[serde(default)]
+    pub color: Option<[u8; 3]>,
+}
+
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BehaviorSpec {
+    /// Follows its path at its speeds once triggered.
+    #[default]
+    Scripted,
+    /// Pose set by the caller every tick (SUMO co-simulation).
+    External,
+}
+
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AtEndSpec {
+    /// Stays at the end of its path.
+    #[default]
+    Stop,
+    /// Leaves the world (no collider, not drawn).
+    Remove,
+}
+
+/// One point of a waypoint path; `speed_mps` is the speed on the leg that arrives here.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WaypointSpec {
+    #[serde(default)]
+    pub lane: Option<String>,
+    #[serde(default)]
+    pub s: Option<f64>,
+    #[serde(default)]
+    pub offset_m: Option<f64>,
+    #[serde(default)]
+    pub x: Option<f64>,
+    #[serde(default)]
+    pub y: Option<f64>,
+    #[serde(default)]
+    pub speed_mps: Option<f64>,
+}
+
+/// A path along lanes: `edges` (gaps routed) or an explicit `lanes` list (junction internal
+/// lanes inserted automatically), cut to [`start_s`, `end_s`] along the route.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RouteSpec {
+    #[serde(default)]
+    pub edges: Option<Vec<String>>,
+    #[serde(default)]
+    pub lanes: Option<Vec<String>>,
+    /// Lane of the first edge to start on (edges form only; default: routing's choice).
+    #[serde(default)]
+    pub start_lane: Option<String>,
+    #[serde(default)]
+    pub start_s: Option<f64>,
+    #[serde(default)]
+    pub end_s: Option<f64>,
+    /// Lateral shift of the whole path, > 0 = left.
+    #[serde(default)]
+    pub offset_m: Option<f64>,
+}
+
+/// What the `of` of a distance trigger refers to.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum OfSpec {
+    Point([f64; 2]),
+    /// Only `"actor_self"`: the actor's own start position.
+    Name(String),
+    Place(PlaceSpec),
+}
+
+/// Start trigger: exactly one of `time_s` or `ego_within_m` (+ `of`, default `"actor_self"`).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TriggerSpec {
+    #[serde(default)]
+    pub time_s: Option<f64>,
+    #[serde(default)]
+    pub ego_within_m: Option<f64>,
+    #[serde(default)]
+    pub of: Option<OfSpec>,
+}
+
+/// A hard-braking event: once at arc length `at_s` of the path, or `after_s` seconds after the
+/// trigger, decelerate at `decel_mps2` to `to_speed_mps`; resume after `hold_s` if given.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BrakeSpec {
+    #[serde(default)]
+    pub at_s: Option<f64>,
+    #[serde(default)]
+    pub after_s: Option<f64>,
+    pub decel_mps2: f64,
+    #[serde(default)]
+    pub to_speed_mps: f64,
+    #[serde(default)]
+    pub hold_s: Option<f64>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ActorSpec {
+    #[serde(default)]
+    pub name: Option<String>,
+    pub kind: ActorKind,
+    #[serde(default)]
+    pub behavior: BehaviorSpec,
+    /// Cruise speed; per-waypoint speeds override it leg by leg. Default by kind
+    /// (pedestrian 1.2, cyclist 4.0, others 8.0 m/s).
+    #[serde(default)]
+    pub speed_mps: Option<f64>,
+    /// Speed at the moment of triggering (default: the first leg's speed).
+    #[serde(default)]
+    pub initial_speed_mps: Option<f64>,
+    /// Limit on speed changes between legs (default: pedestrians instant, others 3.0 m/s²).
+    #[serde(default)]
+    pub accel_mps2: Option<f64>,
+    #[serde(default)]
+    pub waypoints: Option<Vec<WaypointSpec>>,
+    #[serde(default)]
+    pub route: Option<RouteSpec>,
+    /// Where an `external` actor first stands (scripted actors start at their path start).
+    #[serde(default)]
+    pub at: Option<PlaceSpec>,
+    #[serde(default)]
+    pub start: Option<TriggerSpec>,
+    #[serde(default)]
+    pub brake: Option<BrakeSpec>,
+    #[serde(default)]
+    pub at_end: AtEndSpec,
+    #[serde(default)]
+    pub length_m: Option<f64>,
+    #[serde(default)]
+    pub width_m: Option<f64>,
+    #[serde(default)]
+    pub height_m: Option<f64>,
+    #[serde(default)]
+    pub color: Option<[u8; 3]>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SignSpec {
+    pub kind: SignKind,
+    /// On a lane: the post stands `offset_m` (default: right edge + 1 m) beside the lane at `s`
+    /// and faces oncoming traffic; by coordinates `yaw_deg` is the direction the face looks.
+    pub at: PlaceSpec,
+}

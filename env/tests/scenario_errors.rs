@@ -1,0 +1,142 @@
+//! Scenario loading: every kind of bad input gives an error naming file, field and value.
+
+use dh_env::scenario::{validate, Scenario};
+use std::path::PathBuf;
+
+fn fixture_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/world_fixtures")
+}
+
+/// The fixture scenario with `edit` applied, written next to nothing: its map is given by an
+/// absolute path computed at run time.
+fn write_variant(tag: &str, edit: impl Fn(String) -> String) -> PathBuf {
+    let base = std::fs::read_to_string(fixture_dir().join("cross.toml")).unwrap();
+    let map = fixture_dir().join("cross.net.xml");
+    let text =
+        edit(base.replace("map = \"cross.net.xml\"", &format!("map = {:?}", map.display().to_string())));
+    let dir = std::env::temp_dir().join(format!("dh_scenario_errors_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join(format!("{tag}.toml"));
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+fn err_of(tag: &str, edit: impl Fn(String) -> String) -> String {
+    let p = write_variant(tag, edit);
+    let e = Scenario::load(&p).expect_err("must fail").to_string();
+    assert!(e.contains(&p.display().to_string()), "error names the file: {e}");
+    e
+}
+
+#[test]
+fn fixture_validates_with_summary() {
+    let s = validate(fixture_dir().join("cross.toml")).unwrap();
+    assert_eq!(s.id, "test_cross");
+    assert_eq!((s.actors, s.obstacles, s.signs, s.traffic_lights), (3, 1, 1, 8));
+    assert_eq!(s.route_edges, vec!["W_in", "C_E"]);
+    assert!(s.to_string().contains("route"));
+    // Unchanged variant loads too (the map-path rewrite works).
+    Scenario::load(write_variant("same", |t| t)).unwrap();
+}
+
+#[test]
+fn malformed_toml_has_line_and_column() {
+    let e = err_of("syntax", |t| t.replace("speed_mps = 0.0", "speed_mps = = 0.0"));
+    assert!(e.contains("line 12"), "{e}");
+}
+
+#[test]
+fn unknown_key_is_named_with_its_path() {
+    let e = err_of("unknown_key", |t| t.replace("color = [10, 200, 10]", "colour = [10, 200, 10]"));
+    assert!(e.contains("actors[2].colour"), "{e}");
+}
+
+#[test]
+fn missing_map_file() {
+    let e = err_of("missing_map", |t| {
+        let i = t.find("map = ").unwrap();
+        let j = t[i..].find('\n').unwrap() + i;
+        format!("{}map = \"no/such.net.xml\"{}", &t[..i], &t[j..])
+    });
+    assert!(e.contains("`map`") && e.contains("no/such.net.xml") && e.contains("not found"), "{e}");
+}
+
+#[test]
+fn unknown_lane_and_edge_ids() {
+    let e = err_of("lane", |t| t.replace("lane = \"W_in_0\", s = 20.0", "lane = \"W_in_7\", s = 20.0"));
+    assert!(e.contains("ego.start.lane") && e.contains("W_in_7"), "{e}");
+    let e = err_of("edge", |t| t.replace("edges = [\"N_in\", \"C_S\"]", "edges = [\"N_in\", \"nowhere\"]"));
+    assert!(e.contains("actors[1].route.edges[1]") && e.contains("nowhere"), "{e}");
+}
+
+#[test]
+fn unconnected_routes() {
+    // N_in → C_N is a U-turn, absent with --no-turnarounds.
+    let e = err_of("uturn", |t| t.replace("edges = [\"N_in\", \"C_S\"]", "edges = [\"N_in\", \"C_N\"]"));
+    assert!(e.contains("actors[1].route.edges[1]") && e.contains("not reachable"), "{e}");
+    let e =
+        err_of("lanes", |t| t.replace("lanes = [\"W_in_0\", \"C_E_0\"]", "lanes = [\"W_in_0\", \"C_W_0\"]"));
+    assert!(e.contains("actors[2].route.lanes[1]") && e.contains("not connected"), "{e}");
+    let e = err_of("ego_route", |t| {
+        t.replace(
+            "destination = { lane = \"C_E_0\", s = 80.0 }",
+            "destination = { lane = \"C_E_0\", s = 80.0 }\nroute_edges = [\"W_in\", \"C_S\"]",
+        )
+    });
+    assert!(e.contains("ego.destination") && e.contains("C_E"), "{e}");
+}
+
+#[test]
+fn bad_numbers() {
+    let e = err_of("nan", |t| t.replace("speed_mps = 8.0", "speed_mps = nan"));
+    assert!(e.contains("actors[1].speed_mps") && e.contains("NaN"), "{e}");
+    let e = err_of("neg", |t| t.replace("decel_mps2 = 6.0", "decel_mps2 = -6.0"));
+    assert!(e.contains("actors[2].brake.decel_mps2") && e.contains("-6"), "{e}");
+    let e = err_of("beyond", |t| t.replace("s = 80.0", "s = 500.0"));
+    assert!(e.contains("ego.destination.s") && e.contains("500"), "{e}");
+    let e = err_of("tref", |t| t.replace("reference_duration_s = 30.0", "reference_duration_s = -1.0"));
+    assert!(e.contains("reference_duration_s"), "{e}");
+}
+
+#[test]
+fn empty_waypoints_and_bad_triggers() {
+    let e = err_of("empty", |t| {
+        t.replace(
+            "waypoints = [{ x = 180.0, y = 108.0 }, { x = 180.0, y = 125.0, speed_mps = 1.5 }]",
+            "waypoints = []",
+        )
+    });
+    assert!(e.contains("actors[0].waypoints") && e.contains("empty"), "{e}");
+    let e = err_of("trigger", |t| t.replace("of = \"actor_self\"", "of = \"the_ego\""));
+    assert!(e.contains("actors[0].start.of") && e.contains("the_ego"), "{e}");
+    let e = err_of("trigger2", |t| {
+        t.replace("start = { ego_within_m = 40.0,", "start = { time_s = 1.0, ego_within_m = 40.0,")
+    });
+    assert!(e.contains("actors[0].start"), "{e}");
+}
+
+#[test]
+fn bad_category_version_and_destination_behind() {
+    let e = err_of("cat", |t| t.replace("04_intersection", "04_crossing"));
+    assert!(e.contains("category") && e.contains("04_crossing"), "{e}");
+    let e = err_of("ver", |t| t.replace("version = 1", "version = 2"));
+    assert!(e.contains("version"), "{e}");
+    let e = err_of("behind", |t| {
+        t.replace(
+            "destination = { lane = \"C_E_0\", s = 80.0 }",
+            "destination = { lane = \"W_in_0\", s = 5.0 }",
+        )
+    });
+    assert!(e.contains("ego.destination") && e.contains("behind"), "{e}");
+}
+
+#[test]
+fn sumo_map_needs_sumo_home() {
+    use dh_env::scenario::{resolve_map_path, LoadOptions};
+    let f = fixture_dir().join("x.toml");
+    let e = resolve_map_path(&f, "sumo:nope/none.net.xml", Some(&fixture_dir())).unwrap_err().to_string();
+    assert!(e.contains("not found under SUMO_HOME"), "{e}");
+    let p = resolve_map_path(&f, "sumo:cross.net.xml", Some(&fixture_dir())).unwrap();
+    assert!(p.ends_with("cross.net.xml"));
+    let _ = LoadOptions::default();
+}

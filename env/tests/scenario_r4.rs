@@ -1,0 +1,314 @@
+//! Every scenario in `scenarios/r4`: loads, ticks with zero control without panics,
+//! deterministic, and is drivable by a simple privileged driver (pure pursuit + stop for
+//! obstacles in the path) to the destination without contact, long standstill or off-road.
+//!
+//! `sumo:` maps need SUMO_HOME (the env var, else `python3 -c "import sumo"`); without it those
+//! scenarios are skipped with a message.
+
+use dh_env::geom::{Polyline, Vec2};
+use dh_env::scenario::{LoadOptions, ResolvedScenario, Scenario, CATEGORIES};
+use dh_env::view::{ActorKind, LightColor};
+use dh_env::world::Control;
+use dh_env::world::World;
+use dh_env::DT_S;
+use sha2::{Digest, Sha256};
+use std::path::{Path, PathBuf};
+
+fn repo_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf()
+}
+
+fn sumo_home() -> Option<PathBuf> {
+    if let Some(h) = std::env::var_os("SUMO_HOME") {
+        return Some(PathBuf::from(h));
+    }
+    let out = std::process::Command::new("python3")
+        .args(["-c", "import sumo; print(sumo.SUMO_HOME)"])
+        .output()
+        .ok()?;
+    let s = String::from_utf8(out.stdout).ok()?;
+    let p = PathBuf::from(s.trim());
+    (out.status.success() && p.is_dir()).then_some(p)
+}
+
+fn scenario_files() -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let dir = repo_root().join("scenarios/r4");
+    let mut cats: Vec<_> =
+        std::fs::read_dir(&dir).expect("scenarios/r4 exists").flatten().map(|e| e.path()).collect();
+    cats.sort();
+    for c in cats.into_iter().filter(|c| c.is_dir()) {
+        let mut files: Vec<_> = std::fs::read_dir(&c).unwrap().flatten().map(|e| e.path()).collect();
+        files.sort();
+        out.extend(files.into_iter().filter(|f| f.extension().is_some_and(|e| e == "toml")));
+    }
+    out
+}
+
+fn uses_sumo_map(p: &Path) -> bool {
+    std::fs::read_to_string(p)
+        .unwrap()
+        .lines()
+        .any(|l| l.trim_start().starts_with("map") && l.contains("\"sumo:"))
+}
+
+/// Loads every scenario that can be loaded here.
+fn load_all() -> Vec<ResolvedScenario> {
+    let home = sumo_home();
+    let opts = LoadOptions { sumo_home: home.clone(), cache: Some(Default::default()) };
+    let mut out = Vec::new();
+    for f in scenario_files() {
+        if home.is_none() && uses_sumo_map(&f) {
+            eprintln!("skipping {} (no SUMO_HOME)", f.display());
+            continue;
+        }
+        out.push(Scenario::load_with(&f, &opts).unwrap_or_else(|e| panic!("{e}")));
+    }
+    out
+}
+
+#[test]
+fn suite_shape() {
+    let files = scenario_files();
+    assert!(files.len() >= 7, "{files:?}");
+    let all = load_all();
+    let mut categories: Vec<&str> = Vec::new();
+    for s in &all {
+        let folder = s.file.parent().unwrap().file_name().unwrap().to_str().unwrap();
+        assert_eq!(folder, s.category, "{}: folder = category", s.file.display());
+        assert!(CATEGORIES.contains(&folder));
+        let l = s.route_length_m();
+        assert!((100.0..=400.0).contains(&l), "{}: route {l:.1} m", s.id);
+        let t = s.reference_duration_s();
+        assert!((t - l / 7.0).abs() <= 0.1 * l / 7.0, "{}: T_ref {t} vs L/7 = {:.1}", s.id, l / 7.0);
+        categories.push(folder);
+    }
+    for c in [
+        "01_pedestrian",
+        "02_obstacles",
+        "03_turning",
+        "04_intersection",
+        "05_t_intersection",
+        "07_sudden_brake",
+    ] {
+        assert!(categories.contains(&c), "missing {c}");
+    }
+    let mut ids: Vec<&str> = all.iter().map(|s| s.id.as_str()).collect();
+    ids.sort();
+    ids.dedup();
+    assert_eq!(ids.len(), all.len(), "ids are unique");
+}
+
+#[test]
+fn zero_control_runs_and_is_deterministic() {
+    for s in load_all() {
+        let run = || {
+            let mut w = World::new(&s, s.seed).unwrap();
+            let mut h = Sha256::new();
+            for _ in 0..600 {
+                let r = w.tick(&Control::default()).unwrap();
+                if s.ego.speed_mps == 0.0 {
+                    assert_eq!(r.ego.pose, s.ego.start, "{}: ego stays put", s.id);
+                }
+                for a in w.actors() {
+                    for v in [a.pose.pos.x, a.pose.pos.y, a.pose.yaw, a.speed_mps] {
+                        assert!(v.is_finite(), "{}: actor {} finite", s.id, a.id);
+                        h.update(v.to_bits().to_le_bytes());
+                    }
+                }
+                h.update([r.on_road as u8]);
+            }
+            h.finalize().to_vec()
+        };
+        assert_eq!(run(), run(), "{}", s.id);
+    }
+}
+
+/// Outcome of a drive by the test driver.
+#[derive(Debug)]
+struct Outcome {
+    reached: bool,
+    reason: String,
+    time_s: f64,
+    travel_m: f64,
+}
+
+/// Lateral clearance (m) the test driver keeps from actors beside its path.
+const CLEARANCE_M: f64 = 0.6;
+
+fn drive(s: &ResolvedScenario, careful: bool) -> Outcome {
+    let mut w = World::new(s, s.seed).unwrap();
+    let route: &Polyline = &s.ego.route;
+    let p = *w.vehicle_params();
+    let half_len = 0.5 * p.length_m;
+    let mut progress = 0.0f64;
+    let mut offset = 0.0f64; // lateral path offset (> 0 left) used to pass blocked lanes
+    let mut still = 0u32;
+    let mut off_s = 0.0;
+    let mut travel = 0.0;
+    let mut last = w.ego().pose.pos;
+    let t_max = 2.0 * s.reference_duration_s();
+    loop {
+        let ego = *w.ego();
+        let v = ego.speed_mps;
+        // Progress: projection near the previous one (routes may pass close to themselves).
+        let win = route.slice(progress, progress + 30.0);
+        if let Some(q) = win.project(ego.pose.pos) {
+            progress += q.s;
+        }
+        // Obstacles in the (offset) corridor ahead.
+        let mut gap = f64::INFINITY;
+        let mut blocked_static_at = None;
+        for a in w.actors() {
+            let Some(q) = route.project(a.pose.pos) else { continue };
+            let ahead = q.s - progress;
+            if !(-half_len..80.0).contains(&ahead) {
+                continue;
+            }
+            let reach = 0.5 * a.width_m.max(a.length_m.min(a.width_m * 2.0)) + 0.5 * p.width_m + CLEARANCE_M;
+            // Moving actors: also where they will be in 2 s.
+            let fut = a.pose.pos + Vec2::from_angle(a.pose.yaw) * (2.0 * a.speed_mps);
+            let qf = route.project(fut).map_or(q.lateral, |qf| qf.lateral);
+            let lat_now = q.lateral - offset;
+            let lat_fut = qf - offset;
+            let crosses = a.speed_mps > 0.1 && lat_now.signum() != lat_fut.signum();
+            if lat_now.abs() < reach
+                || lat_fut.abs() < reach && a.kind == ActorKind::Pedestrian
+                || crosses && a.kind == ActorKind::Pedestrian
+            {
+                let g = ahead - half_len - 0.5 * a.length_m;
+                gap = gap.min(g);
+                if a.speed_mps < 0.1 && a.kind.is_static() {
+                    blocked_static_at = Some(blocked_static_at.map_or(q.s, |b: f64| b.min(q.s)));
+                }
+            }
+        }
+        if !careful {
+            gap = f64::INFINITY;
+            blocked_static_at = None;
+        }
+        // Pass a static blockage in the lane to the left when that lane is free of statics.
+        if let Some(bs) = blocked_static_at {
+            if bs - progress < 45.0 {
+                offset = 3.2;
+                gap = f64::INFINITY;
+            }
+        } else if offset > 0.0 {
+            let any_static_near = w.actors().iter().any(|a| {
+                a.kind.is_static()
+                    && route
+                        .project(a.pose.pos)
+                        .is_some_and(|q| (q.s - progress).abs() < 12.0 && q.lateral.abs() < 2.5)
+            });
+            if !any_static_near {
+                offset = 0.0;
+            }
+        }
+        // Red / yellow lights on the route ahead.
+        for l in w.lights().iter().filter(|_| careful) {
+            if !matches!(l.color, LightColor::Red | LightColor::Yellow) {
+                continue;
+            }
+            let Some(q) = route.project(l.stop_line.pos) else { continue };
+            let heading_ok = (route.heading_at(q.s) - l.stop_line.yaw).cos() > 0.9;
+            if q.distance < 1.0 && heading_ok && q.s > progress + half_len - 1.0 {
+                gap = gap.min(q.s - progress - half_len - 1.0);
+            }
+        }
+        // Curvature speed limit over the next 40 m.
+        let mut v_max: f64 = 11.0;
+        for k in 1..8 {
+            let a = route.heading_at(progress + 5.0 * k as f64);
+            let b = route.heading_at(progress + 5.0 * (k + 1) as f64);
+            let kappa = dh_env::geom::wrap_angle(b - a).abs() / 5.0;
+            if kappa > 1e-4 {
+                v_max = v_max.min((2.5 / kappa).sqrt().max(3.0));
+            }
+        }
+        let v_gap = if gap.is_finite() { (2.0 * 5.0 * (gap - 3.0).max(0.0)).sqrt() } else { f64::INFINITY };
+        let target = v_max.min(v_gap);
+        // Pure pursuit on the offset route.
+        let ld = (4.0 + 0.6 * v).clamp(6.0, 15.0);
+        let sp = progress + ld;
+        let tp = route.point_at(sp) + Vec2::from_angle(route.heading_at(sp)).perp() * offset;
+        let (f, r) = ego.pose.to_forward_right(tp);
+        let left = -r;
+        let kappa = 2.0 * left / (f * f + left * left).max(1.0);
+        let delta = (p.wheelbase_m * kappa).atan();
+        let steer = (-delta / p.max_steer_deg.to_radians()).clamp(-1.0, 1.0);
+        let e = target - v;
+        let c = if e >= 0.0 {
+            Control { throttle: (0.3 + 0.4 * e).clamp(0.0, 1.0), brake: 0.0, steer }
+        } else {
+            Control { throttle: 0.0, brake: (-0.35 * e).clamp(0.0, 1.0), steer }
+        };
+        let r = w.tick(&c).unwrap();
+        travel += r.ego.pose.pos.dist(last);
+        last = r.ego.pose.pos;
+        if let Some(&(id, class)) = r.contacts.first() {
+            return Outcome {
+                reached: false,
+                reason: format!("contact with {id} ({class:?})"),
+                time_s: r.time_s,
+                travel_m: travel,
+            };
+        }
+        off_s = if r.on_road { 0.0 } else { off_s + DT_S };
+        if off_s >= 1.5 {
+            return Outcome { reached: false, reason: "off road".into(), time_s: r.time_s, travel_m: travel };
+        }
+        if r.ego.pose.pos.dist(s.ego.destination) <= 8.0 {
+            return Outcome {
+                reached: true,
+                reason: "destination".into(),
+                time_s: r.time_s,
+                travel_m: travel,
+            };
+        }
+        still = if r.ego.speed_mps < 1.0 / 3.6 { still + 1 } else { 0 };
+        if still > 100 {
+            return Outcome {
+                reached: false,
+                reason: format!("blocked at progress {progress:.1}"),
+                time_s: r.time_s,
+                travel_m: travel,
+            };
+        }
+        if r.time_s >= t_max {
+            return Outcome { reached: false, reason: "timeout".into(), time_s: r.time_s, travel_m: travel };
+        }
+    }
+}
+
+#[test]
+fn every_scenario_is_drivable() {
+    let mut failures = Vec::new();
+    for s in load_all() {
+        let o = drive(&s, true);
+        let l = s.route_length_m();
+        // PROTOCOL §2.5 efficiency for a clean run.
+        let eff = 0.7 * (1.1 * l / o.travel_m).min(1.0)
+            + 0.3 * (1.5 * s.reference_duration_s() / o.time_s).min(1.0);
+        eprintln!(
+            "{:40} {:>12} t = {:5.1} s travel {:5.1} m / L {:5.1} m  S_eff ≈ {:.3}",
+            s.id, o.reason, o.time_s, o.travel_m, l, eff
+        );
+        if !o.reached || eff < 0.9 {
+            failures.push(format!("{}: {o:?}", s.id));
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// The hazard scenarios must actually be hazardous: the same driver blind to actors crashes.
+#[test]
+fn blind_driver_crashes_in_hazard_scenarios() {
+    for s in load_all() {
+        if !["01_pedestrian", "02_obstacles", "07_sudden_brake"].contains(&s.category.as_str()) {
+            continue;
+        }
+        let o = drive(&s, false);
+        eprintln!("{:40} blind: {} at t = {:.1} s", s.id, o.reason, o.time_s);
+        assert!(o.reason.starts_with("contact"), "{}: {o:?}", s.id);
+    }
+}
