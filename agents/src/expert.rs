@@ -18,7 +18,10 @@
 //!   passed by offsetting the pursuit path laterally into free drivable space.
 
 use dh_env::geom::{wrap_angle, Polyline, Pose, Projection, Vec2};
+use dh_env::map::{LaneIdx, Network};
 use dh_env::view::{ActorKind, ActorView, LightColor, TrafficLightView};
+use dh_env::world::World;
+use smallvec::SmallVec;
 
 /// Tuning of the expert. Defaults are the values the closed-loop tests were tuned with.
 #[derive(Debug, Clone, PartialEq)]
@@ -210,9 +213,11 @@ pub struct ExpertInput<'a> {
     pub lights: &'a [TrafficLightView],
     /// Legal speed on the ego's lane, if known.
     pub speed_limit_mps: Option<f64>,
-    /// Optional drivable-area oracle (true if a point lies on a drivable lane). Enables the
-    /// local planner that passes static obstacles; without it the expert stops before them.
-    pub drivable: Option<&'a dyn Fn(Vec2) -> bool>,
+    /// Optional drivable-area oracle: `drivable(point, heading)` is true if the point lies on a
+    /// drivable lane whose travel direction agrees with `heading` (radians), or inside a
+    /// junction. Enables the local planner that passes static obstacles (never through
+    /// oncoming lanes); without it the expert stops before them. See [`network_drivable`].
+    pub drivable: Option<&'a dyn Fn(Vec2, f64) -> bool>,
 }
 
 impl std::fmt::Debug for ExpertInput<'_> {
@@ -868,7 +873,8 @@ impl Expert {
             if self.detour.is_none() {
                 if let Some(&(s_hit, _)) = blocking_static
                     .iter()
-                    .filter(|(_, a)| a.kind.is_static() || a.speed_mps.abs() < 0.05)
+                    // Only true obstacles: a stopped vehicle may be queuing and is waited for.
+                    .filter(|(_, a)| a.kind.is_static())
                     .min_by(|x, y| x.0.total_cmp(&y.0))
                 {
                     if s_hit - s_front < 40.0 + v * 3.0 {
@@ -922,7 +928,7 @@ impl Expert {
     fn plan_detour(
         &self,
         input: &ExpertInput<'_>,
-        drivable: &dyn Fn(Vec2) -> bool,
+        drivable: &dyn Fn(Vec2, f64) -> bool,
         s_ego: f64,
         v: f64,
         s_hit: f64,
@@ -970,7 +976,12 @@ impl Expert {
         None
     }
 
-    fn detour_clear(&self, input: &ExpertInput<'_>, drivable: &dyn Fn(Vec2) -> bool, d: &Detour) -> bool {
+    fn detour_clear(
+        &self,
+        input: &ExpertInput<'_>,
+        drivable: &dyn Fn(Vec2, f64) -> bool,
+        d: &Detour,
+    ) -> bool {
         let route = input.route;
         let margin = self.params.corridor_margin_m;
         let half_w = input.ego.width_m * 0.5;
@@ -984,7 +995,7 @@ impl Expert {
             let c = base + n * o;
             // Footprint edges (with a small inset) must stay on drivable lanes.
             for e in [-(half_w - 0.2), 0.0, half_w - 0.2] {
-                if !drivable(c + n * e) {
+                if !drivable(c + n * e, dir.angle()) {
                     return false;
                 }
             }
@@ -1015,5 +1026,56 @@ impl Expert {
             s += 1.0;
         }
         true
+    }
+}
+
+/// Lanes whose direction differs from the travel heading by more than this are oncoming.
+const SAME_DIRECTION_MAX_RAD: f64 = 1.0;
+
+/// The drivable-area oracle of a road network for [`ExpertInput::drivable`]: a point is usable
+/// when a passenger lane containing it runs within ~57° of the travel heading, or when it lies
+/// inside a junction outline.
+pub fn network_drivable(net: &Network) -> impl Fn(Vec2, f64) -> bool + '_ {
+    move |p: Vec2, heading: f64| {
+        let idx = net.drivable();
+        let mut lanes: SmallVec<[LaneIdx; 8]> = SmallVec::new();
+        idx.lanes_at(p, &mut lanes);
+        let along = lanes.iter().any(|&l| {
+            let shape = &net.lanes[l].shape;
+            shape.project(p).is_some_and(|pr| {
+                wrap_angle(shape.heading_at(pr.s) - heading).abs() <= SAME_DIRECTION_MAX_RAD
+            })
+        });
+        along || idx.junction_at(p).is_some()
+    }
+}
+
+/// Speed limit of the drivable lane nearest to `p` (within 3 m), m/s.
+pub fn network_speed_limit(net: &Network, p: Vec2) -> Option<f64> {
+    net.drivable().nearest_lane(p, 3.0).map(|(l, _)| net.lanes[l].speed_mps)
+}
+
+impl Expert {
+    /// One decision from a live [`World`]: its ego, actors and lights, the lane speed limit and
+    /// the map's drivable-area oracle. `route` is the scenario's ego route.
+    pub fn act_in_world(&mut self, world: &World, route: &Polyline) -> ExpertAction {
+        let net = world.map();
+        let ego = *world.ego();
+        let oracle = network_drivable(net);
+        let input = ExpertInput {
+            ego: &ego,
+            route,
+            actors: world.actors(),
+            lights: world.lights(),
+            speed_limit_mps: network_speed_limit(net, ego.pose.pos),
+            drivable: Some(&oracle),
+        };
+        self.act(&input)
+    }
+}
+
+impl From<ExpertAction> for dh_env::drive::bridge::Decision {
+    fn from(a: ExpertAction) -> Self {
+        Self { steer: a.steer, target_speed_mps: a.target_speed_mps }
     }
 }

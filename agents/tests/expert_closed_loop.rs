@@ -186,7 +186,7 @@ fn stops_for_a_static_obstacle_without_drivable_space() {
 fn passes_a_static_obstacle_through_the_free_adjacent_lane() {
     let mut sim = Sim::new(straight(220.0));
     // Two lanes: ours (y in [-1.6, 1.6]) and a free one to the left (y up to 4.8).
-    sim.drivable = Some(Box::new(|p: Vec2| p.y > -1.6 && p.y < 4.8 && p.x > -10.0 && p.x < 260.0));
+    sim.drivable = Some(Box::new(|p: Vec2, _h: f64| p.y > -1.6 && p.y < 4.8 && p.x > -10.0 && p.x < 260.0));
     sim.actors.push(Scripted {
         view: actor(4, ActorKind::StaticObject, Vec2::new(80.0, 0.0), 0.0, 0.0, 4.5, 2.0),
         speed: Box::new(|_| 0.0),

@@ -119,7 +119,7 @@ pub struct Sim {
     pub time_limit_s: f64,
     /// Bridge computes throttle/brake every tick (true) or once per decision (false).
     pub per_tick_bridge: bool,
-    pub drivable: Option<Box<dyn Fn(Vec2) -> bool>>,
+    pub drivable: Option<Box<dyn Fn(Vec2, f64) -> bool>>,
     pub speed_limit: Option<f64>,
 }
 
