@@ -330,6 +330,20 @@ fn route_point(route: &Polyline, s: f64) -> Vec2 {
     }
 }
 
+/// Straight extensions added before the start and after the end of the route, m.
+const ROUTE_EXTENSION_BEFORE_M: f64 = 20.0;
+const ROUTE_EXTENSION_AFTER_M: f64 = 80.0;
+
+fn extend_route(route: &Polyline) -> Polyline {
+    let pts = route.points();
+    let len = route.length();
+    let mut out = Vec::with_capacity(pts.len() + 2);
+    out.push(pts[0] - Vec2::from_angle(route.heading_at(0.0)) * ROUTE_EXTENSION_BEFORE_M);
+    out.extend_from_slice(pts);
+    out.push(pts[pts.len() - 1] + Vec2::from_angle(route.heading_at(len)) * ROUTE_EXTENSION_AFTER_M);
+    Polyline::new(out)
+}
+
 /// Route direction at `s`, averaged over ±1 m so vertices do not make it jump.
 fn route_heading(route: &Polyline, s: f64) -> f64 {
     (route_point(route, s + 1.0) - route_point(route, s - 1.0)).angle()
@@ -398,9 +412,9 @@ impl Expert {
     /// a stop with the steer held.
     pub fn act(&mut self, input: &ExpertInput<'_>) -> ExpertAction {
         let ego = input.ego;
-        let route = input.route;
         let ok = ego.pose.pos.is_finite() && ego.pose.yaw.is_finite() && ego.speed_mps.is_finite();
-        if route.len() < 2 || route.length() <= 0.0 || !ok {
+        let finite_route = input.route.points().iter().all(|p| p.is_finite());
+        if input.route.len() < 2 || input.route.length() <= 0.0 || !ok || !finite_route {
             return ExpertAction {
                 steer: self.last_steer,
                 target_speed_mps: 0.0,
@@ -408,6 +422,12 @@ impl Expert {
                 path_offset_m: 0.0,
             };
         }
+        // The episode ends 8 m before the route end, but lookaheads and rollouts reach past it:
+        // extend the route straight on at both ends so projections there stay meaningful
+        // (arc lengths below are on the extended route).
+        let ext = extend_route(input.route);
+        let input = &ExpertInput { route: &ext, ..*input };
+        let route = input.route;
         let v = ego.speed_mps.max(0.0);
         let s_ego = self.progress(route, ego.pose.pos, v);
         self.s_hint = Some(s_ego);
