@@ -3,8 +3,8 @@
 //!
 //! `cargo run --release -p dh-env --example bench_world [SCENARIO.toml] [TICKS]`
 
+use dh_env::drive::Control;
 use dh_env::scenario::{ActorMotion, AtEnd, ResolvedActor, Scenario, Trigger};
-use dh_env::world::Control;
 use dh_env::world::World;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -32,6 +32,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         k += 1;
     }
     let n_actors = s.actors.len();
+    let t_new = Instant::now();
+    for _ in 0..20 {
+        let _ = World::new(&s, 0)?;
+    }
+    let new_ms = t_new.elapsed().as_secs_f64() * 1e3 / 20.0;
+    let mut w1 = World::new(&s, 0)?;
+    let t_first = Instant::now();
+    w1.tick(&Control::default())?;
+    let first_us = t_first.elapsed().as_secs_f64() * 1e6;
     let mut w = World::new(&s, 0)?;
     let mut contacts = 0usize;
     let mut off = 0usize;
@@ -47,16 +56,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let r = w.tick(&c)?;
         contacts += r.contacts.len();
         off += usize::from(!r.on_road);
-        if i % 4000 == 3999 {
+        if i % 800 == 799 {
             // Restart the episode periodically so the actors keep moving.
             w = World::new(&s, 0)?;
         }
     }
     let dt = t0.elapsed().as_secs_f64();
+    println!("World::new {new_ms:.3} ms, first tick {first_us:.1} µs");
     println!(
         "bench_world: {ticks} ticks with {n_actors} actors in {dt:.3} s = {:.0} ticks/s (contacts {contacts}, off-road ticks {off}; includes {} World::new)",
         ticks as f64 / dt,
-        ticks / 4000
+        ticks / 800
     );
     Ok(())
 }

@@ -1,10 +1,10 @@
 //! World tick pipeline on the fixture crossing: dynamics, lights, actors, triggers,
 //! collisions, off-road, external actors and determinism.
 
+use dh_env::drive::Control;
 use dh_env::geom::{Pose, Vec2};
 use dh_env::scenario::{ActorMotion, ResolvedScenario, Scenario};
 use dh_env::view::{ActorKind, ContactClass, LightColor};
-use dh_env::world::Control;
 use dh_env::world::{ExternalSpawn, TickReport, World};
 use dh_env::DT_S;
 use sha2::{Digest, Sha256};

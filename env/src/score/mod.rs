@@ -1,1 +1,17 @@
-//! score (in progress)
+//! Scoring of R4 runs (PROTOCOL.md §2.4–2.5): events, termination order and thresholds, the
+//! route / safety / efficiency terms, the `scene_score.json` record, and re-scoring of a
+//! recorded run without the simulator.
+
+pub mod event;
+pub mod params;
+pub mod record;
+pub mod replay;
+pub mod tracker;
+
+pub use event::{Contact, Event, EventKind, ExternalStop, Termination, TerminationReason, TickInput};
+pub use params::{CarlaPenalties, Penalties, ScoreParams};
+pub use record::{
+    CarlaDialect, Dialects, Location, RunInfo, SceneMeta, SceneScore, Status, PROTOCOL_VERSION,
+};
+pub use replay::{rescore, LogLine, RunFooter, RunHeader, RunLog, TrajectorySample};
+pub use tracker::ScoreTracker;

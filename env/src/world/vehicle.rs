@@ -7,14 +7,7 @@ use crate::geom::{wrap_angle, Pose, Vec2};
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 
-/// Ego command: pedals in [0, 1], steer in [−1, 1] (< 0 = left).
-// Stand-in until `drive::Control` (same fields) lands on main; then this becomes a re-export.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-pub struct Control {
-    pub throttle: f64,
-    pub brake: f64,
-    pub steer: f64,
-}
+pub use crate::drive::Control;
 
 /// Ego vehicle parameters. Units are in the names; angles in degrees where noted.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

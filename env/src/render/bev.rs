@@ -1,0 +1,269 @@
+//! Bird's-eye view (PROTOCOL §2.1): top-down, ego at the centre, ego forward = up, with the
+//! local route drawn as a red polyline, white dots with a red outline on its last points, and
+//! a yellow ego disc. Same precomputed geometry as the cameras, filled by the 2-D scanline
+//! rasterizer (no anti-aliasing: deterministic and fast).
+
+use super::map::{Mat, RenderMap, N_LAYERS, N_MATS};
+use super::mesh::actor_dims;
+use super::raster::{fill_flat, Target, SV};
+use super::{FrameInput, Image, Renderer};
+use crate::error::{Error, Result};
+use crate::geom::Vec2;
+use crate::view::{ActorKind, LightColor};
+use serde::{Deserialize, Serialize};
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BevConfig {
+    /// Square image side, pixels.
+    pub size_px: u32,
+    /// Scale, pixels per metre (protocol: 50 m up, FOV 90°, 800 px → 8 px/m).
+    pub px_per_m: f64,
+    /// How many of the last route points get a white dot with a red outline.
+    pub route_dots_last: u32,
+}
+
+impl Default for BevConfig {
+    fn default() -> Self {
+        BevConfig { size_px: 800, px_per_m: 8.0, route_dots_last: 3 }
+    }
+}
+
+impl BevConfig {
+    /// Small view for RL: 128×128 px at 2 px/m (64 m across).
+    pub fn rl() -> Self {
+        BevConfig { size_px: 128, px_per_m: 2.0, route_dots_last: 3 }
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        if self.size_px == 0 || self.size_px > 8192 {
+            return Err(Error::config("bev.size_px", self.size_px, "must be 1..=8192"));
+        }
+        if !(self.px_per_m.is_finite() && self.px_per_m > 0.01 && self.px_per_m <= 1000.0) {
+            return Err(Error::config("bev.px_per_m", self.px_per_m, "must be in (0.01, 1000]"));
+        }
+        Ok(())
+    }
+}
+
+const BACKGROUND: [u8; 3] = [46, 54, 44];
+pub(crate) const ROUTE_RED: [u8; 3] = [230, 20, 20];
+pub(crate) const EGO_YELLOW: [u8; 3] = [255, 215, 0];
+const ROUTE_LINE_M: f32 = 0.6;
+const ROUTE_DOT_M: f32 = 0.8;
+const EGO_DISC_M: f32 = 1.3;
+
+fn mat_colors() -> [[u8; 3]; N_MATS] {
+    let mut c = [[0u8; 3]; N_MATS];
+    c[Mat::Junction as usize] = [100, 100, 106];
+    c[Mat::Sidewalk as usize] = [150, 148, 140];
+    c[Mat::Road as usize] = [100, 100, 106];
+    c[Mat::BikeLane as usize] = [125, 88, 84];
+    c[Mat::White as usize] = [240, 240, 240];
+    c[Mat::Yellow as usize] = [235, 190, 40];
+    c
+}
+
+/// Map-frame → pixel transform.
+struct View {
+    ego: [f32; 2],
+    f: [f32; 2],
+    r: [f32; 2],
+    s: f32,
+    c: f32,
+}
+
+impl View {
+    #[inline(always)]
+    fn px(&self, q: [f32; 2]) -> SV {
+        let d = [q[0] - self.ego[0], q[1] - self.ego[1]];
+        SV {
+            x: self.c + (d[0] * self.r[0] + d[1] * self.r[1]) * self.s,
+            y: self.c - (d[0] * self.f[0] + d[1] * self.f[1]) * self.s,
+            w: 1.0,
+        }
+    }
+}
+
+fn quad(t: &mut Target, p: [SV; 4], col: [u8; 3]) {
+    fill_flat(t, p[0], p[1], p[2], col);
+    fill_flat(t, p[0], p[2], p[3], col);
+}
+
+fn disc(t: &mut Target, c: SV, r: f32, col: [u8; 3]) {
+    let n = if r > 6.0 { 24 } else { 12 };
+    let v = |i: usize| {
+        let a = std::f32::consts::TAU * i as f32 / n as f32;
+        SV { x: c.x + r * a.cos(), y: c.y + r * a.sin(), w: 1.0 }
+    };
+    for i in 0..n {
+        fill_flat(t, c, v(i), v(i + 1), col);
+    }
+}
+
+/// A thick line a→b in pixels (half width `hw`).
+fn line(t: &mut Target, a: SV, b: SV, hw: f32, col: [u8; 3]) {
+    let (dx, dy) = (b.x - a.x, b.y - a.y);
+    let len = (dx * dx + dy * dy).sqrt();
+    if len <= 1e-6 {
+        return;
+    }
+    let (nx, ny) = (-dy / len * hw, dx / len * hw);
+    let p = |s: &SV, k: f32| SV { x: s.x + nx * k, y: s.y + ny * k, w: 1.0 };
+    quad(t, [p(&a, 1.0), p(&b, 1.0), p(&b, -1.0), p(&a, -1.0)], col);
+}
+
+impl Renderer {
+    /// Renders the bird's-eye view into `out` (resized to `size_px`², allocation reused).
+    pub fn render_bev(
+        &mut self,
+        map: &RenderMap,
+        frame: &FrameInput,
+        cfg: &BevConfig,
+        out: &mut Image,
+    ) -> Result<()> {
+        cfg.validate()?;
+        frame.validate()?;
+        out.resize(cfg.size_px, cfg.size_px);
+        let n = cfg.size_px as usize;
+        for px in out.data.chunks_exact_mut(3) {
+            px.copy_from_slice(&BACKGROUND);
+        }
+        let ego = frame.ego.pose.pos - map.origin;
+        let (sy, cy) = frame.ego.pose.yaw.sin_cos();
+        let v = View {
+            ego: [ego.x as f32, ego.y as f32],
+            f: [cy as f32, sy as f32],
+            r: [sy as f32, -cy as f32],
+            s: cfg.px_per_m as f32,
+            c: n as f32 * 0.5,
+        };
+        let mut t = Target { rgb: &mut out.data, width: n, height: n };
+        let half = n as f32 * 0.5 / v.s * std::f32::consts::SQRT_2 + 2.0;
+
+        self.cells.clear();
+        map.for_cells([v.ego[0] - half, v.ego[1] - half], [v.ego[0] + half, v.ego[1] + half], |i, c| {
+            // Cell box vs the view's circumscribed circle.
+            let cx = v.ego[0].clamp(c.bb[0], c.bb[2]);
+            let cy = v.ego[1].clamp(c.bb[1], c.bb[3]);
+            if (cx - v.ego[0]).powi(2) + (cy - v.ego[1]).powi(2) <= half * half {
+                self.cells.push(i);
+            }
+        });
+        let cols = mat_colors();
+        let nf = n as f32;
+        let off = |p: &[SV]| {
+            p.iter().all(|q| q.x < 0.0)
+                || p.iter().all(|q| q.y < 0.0)
+                || p.iter().all(|q| q.x > nf)
+                || p.iter().all(|q| q.y > nf)
+        };
+        for layer in 0..N_LAYERS {
+            for &ci in &self.cells {
+                let (a, b) = map.cells[ci].tris[layer];
+                for gt in &map.tris[a as usize..b as usize] {
+                    let p = gt.p.map(|q| v.px(q));
+                    if off(&p) {
+                        continue;
+                    }
+                    fill_flat(&mut t, p[0], p[1], p[2], cols[gt.mat as usize]);
+                }
+            }
+        }
+        for &ci in &self.cells {
+            let c = &map.cells[ci];
+            for sg in &map.segs[c.segs.0 as usize..c.segs.1 as usize] {
+                let (a, b) = (v.px(sg.a), v.px(sg.b));
+                if off(&[a, b]) {
+                    continue;
+                }
+                line(&mut t, a, b, (sg.hw * v.s).max(0.5), cols[sg.mat as usize]);
+            }
+        }
+        // Signal state bars across the controlled lane at its stop line.
+        for l in frame.lights {
+            let col = match l.color {
+                LightColor::Red => [235, 30, 30],
+                LightColor::Yellow => [250, 200, 0],
+                LightColor::Green => [40, 220, 70],
+                LightColor::Off => [130, 130, 130],
+            };
+            let p = l.stop_line.pos - map.origin;
+            let f = Vec2::from_angle(l.stop_line.yaw);
+            let across = f.perp() * (l.lane_width_m * 0.5);
+            let a = p - across;
+            let b = p + across;
+            line(
+                &mut t,
+                v.px([a.x as f32, a.y as f32]),
+                v.px([b.x as f32, b.y as f32]),
+                (0.5 * v.s).max(1.0),
+                col,
+            );
+        }
+        for s in frame.signs {
+            let p = s.pose.pos - map.origin;
+            disc(&mut t, v.px([p.x as f32, p.y as f32]), (0.5 * v.s).max(1.5), [220, 30, 30]);
+        }
+        // Actors: dark outline, body colour, a light bar marking the front.
+        for a in frame.actors {
+            if a.id == frame.ego.id && a.pose == frame.ego.pose {
+                continue;
+            }
+            let (l, w, _) = actor_dims(a);
+            let (l, w) = if a.kind == ActorKind::Pedestrian { (l.max(0.7), w.max(0.7)) } else { (l, w) };
+            let p = a.pose.pos - map.origin;
+            let (s, c) = a.pose.yaw.sin_cos();
+            let (fx, fy, lx, ly) = (c as f32, s as f32, -s as f32, c as f32);
+            let (px, py) = (p.x as f32, p.y as f32);
+            let corner = |fw: f32, lf: f32| v.px([px + fx * fw + lx * lf, py + fy * fw + ly * lf]);
+            let o = 1.0 / v.s; // one pixel of outline
+            let (hl, hw) = (l * 0.5, w * 0.5);
+            quad(
+                &mut t,
+                [
+                    corner(hl + o, hw + o),
+                    corner(-hl - o, hw + o),
+                    corner(-hl - o, -hw - o),
+                    corner(hl + o, -hw - o),
+                ],
+                [15, 15, 15],
+            );
+            quad(&mut t, [corner(hl, hw), corner(-hl, hw), corner(-hl, -hw), corner(hl, -hw)], a.color);
+            if !a.kind.is_static() {
+                let fl = (l * 0.22).max(2.0 / v.s).min(l * 0.5);
+                quad(
+                    &mut t,
+                    [
+                        corner(hl, hw * 0.8),
+                        corner(hl - fl, hw * 0.8),
+                        corner(hl - fl, -hw * 0.8),
+                        corner(hl, -hw * 0.8),
+                    ],
+                    [245, 245, 245],
+                );
+            }
+        }
+        // Route: red polyline through the points, dots on the last ones, then the ego disc.
+        let pts: Vec<SV> = frame
+            .route_points
+            .iter()
+            .map(|q| {
+                let r = *q - map.origin;
+                v.px([r.x as f32, r.y as f32])
+            })
+            .collect();
+        let lw = (ROUTE_LINE_M * v.s * 0.5).max(0.6);
+        for w in pts.windows(2) {
+            line(&mut t, w[0], w[1], lw, ROUTE_RED);
+            disc(&mut t, w[1], lw, ROUTE_RED);
+        }
+        let dot_r = (ROUTE_DOT_M * v.s).max(1.5);
+        for p in pts.iter().skip(pts.len().saturating_sub(cfg.route_dots_last as usize)) {
+            disc(&mut t, *p, dot_r, ROUTE_RED);
+            disc(&mut t, *p, (dot_r * 0.62).max(dot_r - 2.5), [255, 255, 255]);
+        }
+        disc(&mut t, v.px(v.ego), (EGO_DISC_M * v.s).max(2.0), EGO_YELLOW);
+        Ok(())
+    }
+}

@@ -1,0 +1,626 @@
+//! Perspective cameras: a pinhole model over a z-buffered scanline rasterizer.
+//!
+//! Ground layers (roads, sidewalks, markings) lie on z = 0 and can never hide anything standing
+//! above the ground from a camera above it, so they are painted in layer order without depth;
+//! actors, signals, signs and props are then depth-tested among themselves.
+
+use super::map::{Mat, RenderMap, N_LAYERS, N_MATS};
+use super::mesh::{self, dot, Frame, Tri3};
+use super::raster::{fill_depth, fill_flat, fill_mask, DepthPlanes, Target, SV};
+use super::{FrameInput, Image, Renderer};
+use crate::error::{Error, Result};
+use serde::{Deserialize, Serialize};
+
+/// A camera rigidly mounted on the ego vehicle.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraConfig {
+    pub width: u32,
+    pub height: u32,
+    /// Horizontal field of view, degrees.
+    pub fov_deg: f64,
+    /// Mount position relative to the vehicle centre on the ground, metres.
+    pub mount_forward_m: f64,
+    pub mount_left_m: f64,
+    pub mount_height_m: f64,
+    /// Positive looks down, degrees.
+    pub pitch_deg: f64,
+    /// Positive looks left of the vehicle heading, degrees.
+    pub yaw_deg: f64,
+    /// Render at `supersample`× resolution per axis and box-filter down (1 = off, max 4).
+    pub supersample: u8,
+    /// Draw the ego vehicle itself (chase cameras); mounted cameras leave it out.
+    pub draw_ego: bool,
+    /// Nothing farther than this is drawn, metres.
+    pub draw_distance_m: f64,
+}
+
+impl Default for CameraConfig {
+    /// PROTOCOL §2.1 front camera: 800×450, FOV 100°, 1.5 m ahead, 2.4 m up, pitched 5° down.
+    fn default() -> Self {
+        CameraConfig {
+            width: 800,
+            height: 450,
+            fov_deg: 100.0,
+            mount_forward_m: 1.5,
+            mount_left_m: 0.0,
+            mount_height_m: 2.4,
+            pitch_deg: 5.0,
+            yaw_deg: 0.0,
+            supersample: 1,
+            draw_ego: false,
+            draw_distance_m: 200.0,
+        }
+    }
+}
+
+impl CameraConfig {
+    /// The protocol front camera (same as `Default`).
+    pub fn front() -> Self {
+        Self::default()
+    }
+
+    /// A chase camera 7 m behind and 3.2 m above the ego, looking down 12°, ego drawn.
+    pub fn chase() -> Self {
+        CameraConfig {
+            fov_deg: 90.0,
+            mount_forward_m: -7.0,
+            mount_height_m: 3.2,
+            pitch_deg: 12.0,
+            draw_ego: true,
+            ..Self::default()
+        }
+    }
+
+    /// Six-camera surround rig modelled on nuScenes (names as in nuScenes), 800×450 each.
+    pub fn surround_rig() -> [(&'static str, CameraConfig); 6] {
+        let cam = |fwd: f64, left: f64, yaw: f64, fov: f64| CameraConfig {
+            fov_deg: fov,
+            mount_forward_m: fwd,
+            mount_left_m: left,
+            mount_height_m: 1.6,
+            pitch_deg: 0.0,
+            yaw_deg: yaw,
+            ..Self::default()
+        };
+        [
+            ("CAM_FRONT", cam(1.7, 0.0, 0.0, 70.0)),
+            ("CAM_FRONT_LEFT", cam(1.5, 0.5, 55.0, 70.0)),
+            ("CAM_FRONT_RIGHT", cam(1.5, -0.5, -55.0, 70.0)),
+            ("CAM_BACK", cam(-2.0, 0.0, 180.0, 110.0)),
+            ("CAM_BACK_LEFT", cam(-0.5, 0.5, 110.0, 70.0)),
+            ("CAM_BACK_RIGHT", cam(-0.5, -0.5, -110.0, 70.0)),
+        ]
+    }
+
+    /// Checks sizes and angles; names the offending field.
+    pub fn validate(&self) -> Result<()> {
+        if self.width == 0 || self.height == 0 || self.width > 8192 || self.height > 8192 {
+            return Err(Error::config(
+                "camera.width/height",
+                format!("{}x{}", self.width, self.height),
+                "must be 1..=8192",
+            ));
+        }
+        if !(self.fov_deg > 1.0 && self.fov_deg < 170.0) {
+            return Err(Error::config("camera.fov_deg", self.fov_deg, "must be in (1, 170)"));
+        }
+        if !(1..=4).contains(&self.supersample) {
+            return Err(Error::config("camera.supersample", self.supersample, "must be 1..=4"));
+        }
+        for (f, v) in [
+            ("camera.mount_forward_m", self.mount_forward_m),
+            ("camera.mount_left_m", self.mount_left_m),
+            ("camera.mount_height_m", self.mount_height_m),
+            ("camera.pitch_deg", self.pitch_deg),
+            ("camera.yaw_deg", self.yaw_deg),
+        ] {
+            if !v.is_finite() {
+                return Err(Error::config(f, v, "must be finite"));
+            }
+        }
+        if !(self.mount_height_m > 0.05) {
+            return Err(Error::config(
+                "camera.mount_height_m",
+                self.mount_height_m,
+                "must be above the ground (> 0.05)",
+            ));
+        }
+        if !(self.pitch_deg.abs() < 89.0) {
+            return Err(Error::config("camera.pitch_deg", self.pitch_deg, "must be within ±89"));
+        }
+        if !(self.draw_distance_m > 1.0 && self.draw_distance_m.is_finite()) {
+            return Err(Error::config(
+                "camera.draw_distance_m",
+                self.draw_distance_m,
+                "must be finite and > 1",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// One actor as a camera sees it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ProjectedActor {
+    pub id: u32,
+    /// Pixel box [x_min, y_min, x_max, y_max] of the actor's silhouette clipped to the image
+    /// (max exclusive).
+    pub bbox_px: [f32; 4],
+    /// Projection of the actor's centre at half its height (may lie outside the image).
+    pub center_px: [f32; 2],
+    /// 2-D distance from the ego centre to the actor centre, metres.
+    pub distance_m: f64,
+    /// Unoccluded share of the actor's in-image silhouette pixels, 0..=1.
+    pub visible_fraction: f32,
+    /// Silhouette pixels inside the image.
+    pub pixel_count: u32,
+}
+
+const NEAR: f32 = 0.1;
+const SKY_TOP: [f32; 3] = [92.0, 145.0, 215.0];
+const HORIZON: [f32; 3] = [205.0, 215.0, 225.0];
+const GRASS: [f32; 3] = [110.0, 128.0, 88.0];
+const FOG0: f32 = 45.0;
+const FOG1: f32 = 260.0;
+
+fn mat_colors() -> [[u8; 3]; N_MATS] {
+    let mut c = [[0u8; 3]; N_MATS];
+    c[Mat::Junction as usize] = [92, 92, 96];
+    c[Mat::Sidewalk as usize] = [168, 164, 156];
+    c[Mat::Road as usize] = [88, 88, 92];
+    c[Mat::BikeLane as usize] = [120, 80, 78];
+    c[Mat::White as usize] = [238, 238, 232];
+    c[Mat::Yellow as usize] = [235, 190, 40];
+    c
+}
+
+/// Camera pose and intrinsics in the map frame (f32).
+pub(crate) struct Cam {
+    pub pos: [f32; 3],
+    pub r: [f32; 3],
+    pub d: [f32; 3],
+    pub f: [f32; 3],
+    pub fx: f32,
+    pub cx: f32,
+    pub cy: f32,
+    pub w: usize,
+    pub h: usize,
+    /// tan of the half FOVs (frustum side planes), with a small margin.
+    pub tx: f32,
+    pub ty: f32,
+    pub far: f32,
+}
+
+impl Cam {
+    pub fn new(map: &RenderMap, frame: &FrameInput, cfg: &CameraConfig, scale: usize) -> Cam {
+        let ego = &frame.ego.pose;
+        let mount = ego.local_to_world(cfg.mount_forward_m, cfg.mount_left_m) - map.origin;
+        let yaw = ego.yaw + cfg.yaw_deg.to_radians();
+        let pitch = cfg.pitch_deg.to_radians();
+        let (sy, cy) = yaw.sin_cos();
+        let (sp, cp) = pitch.sin_cos();
+        let f = [(cy * cp) as f32, (sy * cp) as f32, (-sp) as f32];
+        let r = [sy as f32, -cy as f32, 0.0];
+        // down = f × r
+        let d = [f[1] * r[2] - f[2] * r[1], f[2] * r[0] - f[0] * r[2], f[0] * r[1] - f[1] * r[0]];
+        let w = cfg.width as usize * scale;
+        let h = cfg.height as usize * scale;
+        let fx = (w as f64 * 0.5 / (cfg.fov_deg.to_radians() * 0.5).tan()) as f32;
+        Cam {
+            pos: [mount.x as f32, mount.y as f32, cfg.mount_height_m as f32],
+            r,
+            d,
+            f,
+            fx,
+            cx: w as f32 * 0.5,
+            cy: h as f32 * 0.5,
+            w,
+            h,
+            tx: (w as f32 * 0.5 + 2.0) / fx,
+            ty: (h as f32 * 0.5 + 2.0) / fx,
+            far: cfg.draw_distance_m as f32,
+        }
+    }
+
+    #[inline(always)]
+    pub fn to_cam(&self, p: [f32; 3]) -> [f32; 3] {
+        let q = [p[0] - self.pos[0], p[1] - self.pos[1], p[2] - self.pos[2]];
+        [dot(q, self.r), dot(q, self.d), dot(q, self.f)]
+    }
+
+    #[inline(always)]
+    fn project(&self, c: [f32; 3]) -> SV {
+        let iw = 1.0 / c[2];
+        SV { x: self.cx + self.fx * c[0] * iw, y: self.cy + self.fx * c[1] * iw, w: iw }
+    }
+
+    /// True when all points lie outside one frustum plane.
+    #[inline(always)]
+    fn outside(&self, c: &[[f32; 3]]) -> bool {
+        let all = |f: &dyn Fn(&[f32; 3]) -> bool| c.iter().all(f);
+        all(&|p| p[2] < NEAR)
+            || all(&|p| p[2] > self.far)
+            || all(&|p| p[0] > p[2] * self.tx)
+            || all(&|p| p[0] < -p[2] * self.tx)
+            || all(&|p| p[1] > p[2] * self.ty)
+            || all(&|p| p[1] < -p[2] * self.ty)
+    }
+
+    /// Clips a camera-space triangle against the near plane and projects it: returns the
+    /// number of screen vertices (0, 3 or 4) of the resulting convex polygon.
+    #[inline(always)]
+    fn clip_project(&self, c: [[f32; 3]; 3], out: &mut [SV; 4]) -> usize {
+        if c.iter().all(|p| p[2] >= NEAR) {
+            for k in 0..3 {
+                out[k] = self.project(c[k]);
+            }
+            return 3;
+        }
+        let mut n = 0;
+        for i in 0..3 {
+            let a = c[i];
+            let b = c[(i + 1) % 3];
+            let ina = a[2] >= NEAR;
+            let inb = b[2] >= NEAR;
+            if ina {
+                if n < 4 {
+                    out[n] = self.project(a);
+                }
+                n += 1;
+            }
+            if ina != inb {
+                let t = (NEAR - a[2]) / (b[2] - a[2]);
+                let p = [a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t, NEAR];
+                if n < 4 {
+                    out[n] = self.project(p);
+                }
+                n += 1;
+            }
+        }
+        n.min(4)
+    }
+
+    /// Frustum test of a map-frame box [min x, min y, max x, max y] × [0, zmax].
+    fn sees_box(&self, bb: [f32; 4], zmax: f32) -> bool {
+        if bb[0] > bb[2] {
+            return false;
+        }
+        let mut c = [[0f32; 3]; 8];
+        let mut k = 0;
+        for x in [bb[0], bb[2]] {
+            for y in [bb[1], bb[3]] {
+                for z in [0.0, zmax] {
+                    c[k] = self.to_cam([x, y, z]);
+                    k += 1;
+                }
+            }
+        }
+        !self.outside(&c)
+    }
+}
+
+fn fog_k(d: f32) -> f32 {
+    ((d - FOG0) / (FOG1 - FOG0)).clamp(0.0, 0.8)
+}
+
+#[inline(always)]
+fn fogged(col: [u8; 3], k: f32) -> [u8; 3] {
+    if k <= 0.0 {
+        return col;
+    }
+    [
+        (col[0] as f32 + (HORIZON[0] - col[0] as f32) * k) as u8,
+        (col[1] as f32 + (HORIZON[1] - col[1] as f32) * k) as u8,
+        (col[2] as f32 + (HORIZON[2] - col[2] as f32) * k) as u8,
+    ]
+}
+
+fn lerp3(a: [f32; 3], b: [f32; 3], t: f32) -> [u8; 3] {
+    [(a[0] + (b[0] - a[0]) * t) as u8, (a[1] + (b[1] - a[1]) * t) as u8, (a[2] + (b[2] - a[2]) * t) as u8]
+}
+
+/// Appends the dynamic scene (actors, signals, signs) to `out`; actor triangles carry
+/// id = index in `frame.actors` + 1, the ego `u32::MAX` when drawn.
+pub(crate) fn dynamic_tris(map: &RenderMap, frame: &FrameInput, draw_ego: bool, out: &mut Vec<Tri3>) {
+    if draw_ego {
+        mesh::actor(out, frame.ego, map.origin, u32::MAX);
+    }
+    for (i, a) in frame.actors.iter().enumerate() {
+        if a.id == frame.ego.id && a.pose == frame.ego.pose {
+            continue;
+        }
+        mesh::actor(out, a, map.origin, i as u32 + 1);
+    }
+    for l in frame.lights {
+        let place = map.signal_places.get(&l.lane_id);
+        let far = place.map_or(15.0, |p| p.far_m);
+        let right = place.map_or(l.lane_width_m as f32 * 0.5 + 0.8, |p| p.right_m);
+        let fr = Frame::new(l.stop_line.pos, l.stop_line.yaw, map.origin, 0.0).offset(far, 0.0, 0.0);
+        mesh::signal(out, &fr, 5.2, l.color, Some(right));
+    }
+    for s in frame.signs {
+        let fr = Frame::new(s.pose.pos, s.pose.yaw, map.origin, 0.0);
+        mesh::sign(out, &fr, s.kind);
+    }
+}
+
+impl Renderer {
+    /// Renders one camera into `out` (resized to the configured size, allocation reused).
+    pub fn render_camera(
+        &mut self,
+        map: &RenderMap,
+        frame: &FrameInput,
+        cfg: &CameraConfig,
+        out: &mut Image,
+    ) -> Result<()> {
+        cfg.validate()?;
+        frame.validate()?;
+        out.resize(cfg.width, cfg.height);
+        let s = cfg.supersample as usize;
+        let cam = Cam::new(map, frame, cfg, s);
+        if s == 1 {
+            let mut rgb = std::mem::take(&mut out.data);
+            self.draw_scene(map, frame, cfg, &cam, &mut rgb, false);
+            out.data = rgb;
+        } else {
+            let mut ss = std::mem::take(&mut self.ss);
+            ss.resize(cam.w * cam.h * 3, 0);
+            self.draw_scene(map, frame, cfg, &cam, &mut ss, false);
+            downsample(&ss, cam.w, s, &mut out.data, cfg.width as usize, cfg.height as usize);
+            self.ss = ss;
+        }
+        Ok(())
+    }
+
+    fn draw_scene(
+        &mut self,
+        map: &RenderMap,
+        frame: &FrameInput,
+        cfg: &CameraConfig,
+        cam: &Cam,
+        rgb: &mut [u8],
+        with_ids: bool,
+    ) {
+        let (w, h) = (cam.w, cam.h);
+        self.depth.clear();
+        self.depth.resize(w * h, 0.0);
+        if with_ids {
+            self.ids.clear();
+            self.ids.resize(w * h, 0);
+        }
+        background(cam, rgb);
+        let mut t = Target { rgb, width: w, height: h };
+
+        // Cells in the draw-distance square, frustum-tested.
+        self.cells.clear();
+        let r = cam.far;
+        map.for_cells([cam.pos[0] - r, cam.pos[1] - r], [cam.pos[0] + r, cam.pos[1] + r], |i, c| {
+            if cam.sees_box(c.bb, c.zmax) {
+                self.cells.push(i);
+            }
+        });
+        let cols = mat_colors();
+        let mut poly = [SV { x: 0.0, y: 0.0, w: 0.0 }; 4];
+        for layer in 0..N_LAYERS {
+            for &off in &self.cells {
+                let c = &map.cells[off];
+                let (a, b) = c.tris[layer];
+                for gt in &map.tris[a as usize..b as usize] {
+                    let p = gt.p.map(|q| cam.to_cam([q[0], q[1], 0.0]));
+                    if cam.outside(&p) {
+                        continue;
+                    }
+                    let cxy = [
+                        (gt.p[0][0] + gt.p[1][0] + gt.p[2][0]) / 3.0,
+                        (gt.p[0][1] + gt.p[1][1] + gt.p[2][1]) / 3.0,
+                    ];
+                    let d = ((cxy[0] - cam.pos[0]).powi(2) + (cxy[1] - cam.pos[1]).powi(2)).sqrt();
+                    let col = fogged(cols[gt.mat as usize], fog_k(d));
+                    let n = cam.clip_project(p, &mut poly);
+                    for k in 1..n.saturating_sub(1) {
+                        fill_flat(&mut t, poly[0], poly[k], poly[k + 1], col);
+                    }
+                }
+            }
+        }
+        // Markings: quads around their centre line, at least ~1.3 px wide.
+        let min_px = 1.3 / cam.fx;
+        for &off in &self.cells {
+            let c = &map.cells[off];
+            for sg in &map.segs[c.segs.0 as usize..c.segs.1 as usize] {
+                let (dx, dy) = (sg.b[0] - sg.a[0], sg.b[1] - sg.a[1]);
+                let len = (dx * dx + dy * dy).sqrt();
+                if len <= 0.0 {
+                    continue;
+                }
+                let mid = [(sg.a[0] + sg.b[0]) * 0.5 - cam.pos[0], (sg.a[1] + sg.b[1]) * 0.5 - cam.pos[1]];
+                let d = (mid[0] * mid[0] + mid[1] * mid[1]).sqrt();
+                let hw = sg.hw.max(d * min_px * 0.5);
+                let (nx, ny) = (-dy / len * hw, dx / len * hw);
+                let q = [
+                    cam.to_cam([sg.a[0] - nx, sg.a[1] - ny, 0.0]),
+                    cam.to_cam([sg.b[0] - nx, sg.b[1] - ny, 0.0]),
+                    cam.to_cam([sg.b[0] + nx, sg.b[1] + ny, 0.0]),
+                    cam.to_cam([sg.a[0] + nx, sg.a[1] + ny, 0.0]),
+                ];
+                if cam.outside(&q) {
+                    continue;
+                }
+                let col = fogged(cols[sg.mat as usize], fog_k(d));
+                for tri in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
+                    let n = cam.clip_project(tri, &mut poly);
+                    for k in 1..n.saturating_sub(1) {
+                        fill_flat(&mut t, poly[0], poly[k], poly[k + 1], col);
+                    }
+                }
+            }
+        }
+
+        // 3-D: props, then the dynamic scene.
+        let mut dynamic = std::mem::take(&mut self.tris);
+        dynamic.clear();
+        dynamic_tris(map, frame, cfg.draw_ego, &mut dynamic);
+        let mut dp =
+            DepthPlanes { depth: &mut self.depth, ids: if with_ids { Some(&mut self.ids) } else { None } };
+        for &off in &self.cells {
+            let c = &map.cells[off];
+            for tr in &map.props[c.props.0 as usize..c.props.1 as usize] {
+                draw_tri3(cam, &mut t, &mut dp, tr, &mut poly);
+            }
+        }
+        for tr in &dynamic {
+            draw_tri3(cam, &mut t, &mut dp, tr, &mut poly);
+        }
+        self.tris = dynamic;
+    }
+
+    /// Every actor of `frame.actors` the camera sees: silhouette box, centre, distance and the
+    /// unoccluded share of its silhouette (from an id buffer of the full scene).
+    pub fn project_actors(
+        &mut self,
+        map: &RenderMap,
+        frame: &FrameInput,
+        cfg: &CameraConfig,
+    ) -> Result<Vec<ProjectedActor>> {
+        cfg.validate()?;
+        frame.validate()?;
+        let cam = Cam::new(map, frame, cfg, 1);
+        let mut rgb = std::mem::take(&mut self.ss);
+        rgb.resize(cam.w * cam.h * 3, 0);
+        self.draw_scene(map, frame, cfg, &cam, &mut rgb, true);
+        self.ss = rgb;
+        let (w, h) = (cam.w, cam.h);
+        let mut mask = std::mem::take(&mut self.mask);
+        mask.clear();
+        mask.resize(w * h, 0);
+        let mut tris = std::mem::take(&mut self.tris);
+        let mut poly = [SV { x: 0.0, y: 0.0, w: 0.0 }; 4];
+        let mut res = Vec::new();
+        for (i, a) in frame.actors.iter().enumerate() {
+            if a.id == frame.ego.id && a.pose == frame.ego.pose {
+                continue;
+            }
+            let stamp = i as u32 + 1;
+            tris.clear();
+            mesh::actor(&mut tris, a, map.origin, stamp);
+            let mut total = 0usize;
+            for tr in &tris {
+                let c = tr.p.map(|p| cam.to_cam(p));
+                if cam.outside(&c) {
+                    continue;
+                }
+                let n = cam.clip_project(c, &mut poly);
+                for k in 1..n.saturating_sub(1) {
+                    total += fill_mask(&mut mask, w, h, poly[0], poly[k], poly[k + 1], stamp);
+                }
+            }
+            if total == 0 {
+                continue;
+            }
+            let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+            let mut visible = 0usize;
+            for y in 0..h {
+                let row = &mask[y * w..(y + 1) * w];
+                if !row.contains(&stamp) {
+                    continue;
+                }
+                for (x, m) in row.iter().enumerate() {
+                    if *m == stamp {
+                        x0 = x0.min(x);
+                        x1 = x1.max(x + 1);
+                        y0 = y0.min(y);
+                        y1 = y1.max(y + 1);
+                        if self.ids[y * w + x] == stamp {
+                            visible += 1;
+                        }
+                    }
+                }
+            }
+            let (_, _, hgt) = mesh::actor_dims(a);
+            let centre = a.pose.pos - map.origin;
+            let cc = cam.to_cam([centre.x as f32, centre.y as f32, hgt * 0.5]);
+            let cp = if cc[2] > 1e-3 { cam.project(cc) } else { SV { x: f32::NAN, y: f32::NAN, w: 0.0 } };
+            res.push(ProjectedActor {
+                id: a.id,
+                bbox_px: [x0 as f32, y0 as f32, x1 as f32, y1 as f32],
+                center_px: [cp.x, cp.y],
+                distance_m: a.pose.pos.dist(frame.ego.pose.pos),
+                visible_fraction: visible as f32 / total as f32,
+                pixel_count: total as u32,
+            });
+        }
+        self.tris = tris;
+        self.mask = mask;
+        Ok(res)
+    }
+}
+
+#[inline(always)]
+fn draw_tri3(cam: &Cam, t: &mut Target, dp: &mut DepthPlanes, tr: &Tri3, poly: &mut [SV; 4]) {
+    let p0 = tr.p[0];
+    if !tr.two_sided {
+        let v = [p0[0] - cam.pos[0], p0[1] - cam.pos[1], p0[2] - cam.pos[2]];
+        if dot(v, tr.n) >= 0.0 {
+            return;
+        }
+    }
+    let c = tr.p.map(|p| cam.to_cam(p));
+    if cam.outside(&c) {
+        return;
+    }
+    let col = if tr.emissive {
+        tr.col
+    } else {
+        let d = ((p0[0] - cam.pos[0]).powi(2) + (p0[1] - cam.pos[1]).powi(2)).sqrt();
+        fogged(tr.col, fog_k(d))
+    };
+    let n = cam.clip_project(c, poly);
+    for k in 1..n.saturating_sub(1) {
+        fill_depth(t, dp, poly[0], poly[k], poly[k + 1], col, tr.id);
+    }
+}
+
+/// Sky gradient above the horizon, fogged grass below; constant along each row because the
+/// camera has no roll.
+fn background(cam: &Cam, rgb: &mut [u8]) {
+    let w = cam.w;
+    for y in 0..cam.h {
+        let yc = (y as f32 + 0.5 - cam.cy) / cam.fx;
+        let dir = [cam.d[0] * yc + cam.f[0], cam.d[1] * yc + cam.f[1], cam.d[2] * yc + cam.f[2]];
+        let horiz = (dir[0] * dir[0] + dir[1] * dir[1]).sqrt();
+        let col = if dir[2] >= 0.0 {
+            let elev = dir[2] / horiz.max(1e-6);
+            lerp3(HORIZON, SKY_TOP, (elev * 2.5).min(1.0))
+        } else {
+            let dist = cam.pos[2] / -dir[2] * horiz;
+            fogged(GRASS.map(|v| v as u8), ((dist - FOG0) / (FOG1 * 1.6 - FOG0)).clamp(0.0, 1.0))
+        };
+        let row = &mut rgb[y * w * 3..(y + 1) * w * 3];
+        for px in row.chunks_exact_mut(3) {
+            px.copy_from_slice(&col);
+        }
+    }
+}
+
+/// Box-filters an s×-supersampled RGB buffer down to `w × h`.
+fn downsample(src: &[u8], sw: usize, s: usize, dst: &mut [u8], w: usize, h: usize) {
+    let n = (s * s) as u32;
+    for y in 0..h {
+        for x in 0..w {
+            let mut acc = [0u32; 3];
+            for dy in 0..s {
+                let base = ((y * s + dy) * sw + x * s) * 3;
+                for dx in 0..s {
+                    for k in 0..3 {
+                        acc[k] += src[base + dx * 3 + k] as u32;
+                    }
+                }
+            }
+            let o = (y * w + x) * 3;
+            for k in 0..3 {
+                dst[o + k] = ((acc[k] + n / 2) / n) as u8;
+            }
+        }
+    }
+}

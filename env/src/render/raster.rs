@@ -1,0 +1,194 @@
+//! Scanline triangle fill into RGB8 buffers, with and without a depth buffer.
+//!
+//! Pixel centres sit at (x + 0.5, y + 0.5); a pixel is covered when its centre lies in
+//! [left, right) × [top, bottom) of the triangle's span — a top-left style rule, so shared edges
+//! are filled exactly once and results are deterministic.
+
+/// A colour target: RGB8 rows (`stride` bytes per row) plus its size in pixels.
+pub(crate) struct Target<'a> {
+    pub rgb: &'a mut [u8],
+    pub width: usize,
+    pub height: usize,
+}
+
+/// Depth (1/z, larger is nearer) and optional id planes matching a [`Target`].
+pub(crate) struct DepthPlanes<'a> {
+    pub depth: &'a mut [f32],
+    /// When present, every written pixel stores `id` (actor index + 1; 0 = none).
+    pub ids: Option<&'a mut [u32]>,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SV {
+    pub x: f32,
+    pub y: f32,
+    /// 1 / camera depth (only used by the depth-tested fill).
+    pub w: f32,
+}
+
+/// Iterates the covered rows of a triangle: calls `span(y, x0, x1, xf)` with integer pixel
+/// bounds `[x0, x1)` and the row's centre y as float.
+#[inline(always)]
+fn for_spans(a: SV, b: SV, c: SV, width: usize, height: usize, mut span: impl FnMut(usize, usize, usize)) {
+    // Sort by y.
+    let (mut v0, mut v1, mut v2) = (a, b, c);
+    if v1.y < v0.y {
+        std::mem::swap(&mut v0, &mut v1);
+    }
+    if v2.y < v1.y {
+        std::mem::swap(&mut v1, &mut v2);
+    }
+    if v1.y < v0.y {
+        std::mem::swap(&mut v0, &mut v1);
+    }
+    if !(v0.y.is_finite() && v2.y.is_finite() && v0.x.is_finite() && v1.x.is_finite() && v2.x.is_finite()) {
+        return;
+    }
+    let hf = height as f32;
+    let wf = width as f32;
+    let y_start = ((v0.y - 0.5).ceil().max(0.0)) as i64;
+    let y_end = ((v2.y - 0.5).ceil().min(hf)) as i64; // exclusive
+    if y_start >= y_end {
+        return;
+    }
+    let dy_long = v2.y - v0.y;
+    if dy_long <= 0.0 {
+        return;
+    }
+    let inv_long = (v2.x - v0.x) / dy_long;
+    // Which side is the long edge on? Compare x of the long edge at v1.y with v1.x.
+    let x_long_at_mid = v0.x + inv_long * (v1.y - v0.y);
+    let long_is_left = x_long_at_mid < v1.x;
+    let inv_top = if v1.y > v0.y { (v1.x - v0.x) / (v1.y - v0.y) } else { 0.0 };
+    let inv_bot = if v2.y > v1.y { (v2.x - v1.x) / (v2.y - v1.y) } else { 0.0 };
+    for y in y_start..y_end {
+        let yc = y as f32 + 0.5;
+        let xl_long = v0.x + inv_long * (yc - v0.y);
+        let xs = if yc < v1.y { v0.x + inv_top * (yc - v0.y) } else { v1.x + inv_bot * (yc - v1.y) };
+        let (xl, xr) = if long_is_left { (xl_long, xs) } else { (xs, xl_long) };
+        let x0 = (xl - 0.5).ceil().max(0.0);
+        let x1 = (xr - 0.5).ceil().min(wf);
+        if x0 < x1 {
+            span(y as usize, x0 as usize, x1 as usize);
+        }
+    }
+}
+
+/// Fills a triangle with a flat colour, no depth (painter's order).
+pub(crate) fn fill_flat(t: &mut Target, a: SV, b: SV, c: SV, col: [u8; 3]) {
+    let w = t.width;
+    let rgb = &mut *t.rgb;
+    for_spans(a, b, c, t.width, t.height, |y, x0, x1| {
+        let row = &mut rgb[(y * w + x0) * 3..(y * w + x1) * 3];
+        for px in row.chunks_exact_mut(3) {
+            px.copy_from_slice(&col);
+        }
+    });
+}
+
+/// Fills a triangle with depth test on 1/z (perspective-correct: 1/z is affine in screen space).
+pub(crate) fn fill_depth(t: &mut Target, d: &mut DepthPlanes, a: SV, b: SV, c: SV, col: [u8; 3], id: u32) {
+    // Plane of w over the screen: w = w0 + dwdx (x - a.x) + dwdy (y - a.y).
+    let e1x = b.x - a.x;
+    let e1y = b.y - a.y;
+    let e2x = c.x - a.x;
+    let e2y = c.y - a.y;
+    let det = e1x * e2y - e2x * e1y;
+    if det.abs() < 1e-12 {
+        return;
+    }
+    let dw1 = b.w - a.w;
+    let dw2 = c.w - a.w;
+    let dwdx = (dw1 * e2y - dw2 * e1y) / det;
+    let dwdy = (dw2 * e1x - dw1 * e2x) / det;
+    let w = t.width;
+    let rgb = &mut *t.rgb;
+    let depth = &mut *d.depth;
+    let mut ids = d.ids.as_deref_mut();
+    for_spans(a, b, c, t.width, t.height, |y, x0, x1| {
+        let yc = y as f32 + 0.5;
+        let base = a.w + dwdy * (yc - a.y) + dwdx * (x0 as f32 + 0.5 - a.x);
+        let drow = &mut depth[y * w + x0..y * w + x1];
+        let crow = &mut rgb[(y * w + x0) * 3..(y * w + x1) * 3];
+        let mut z = base;
+        match ids.as_deref_mut() {
+            None => {
+                for (dz, px) in drow.iter_mut().zip(crow.chunks_exact_mut(3)) {
+                    if z > *dz {
+                        *dz = z;
+                        px.copy_from_slice(&col);
+                    }
+                    z += dwdx;
+                }
+            }
+            Some(ids) => {
+                let irow = &mut ids[y * w + x0..y * w + x1];
+                for ((dz, px), pid) in drow.iter_mut().zip(crow.chunks_exact_mut(3)).zip(irow.iter_mut()) {
+                    if z > *dz {
+                        *dz = z;
+                        px.copy_from_slice(&col);
+                        *pid = id;
+                    }
+                    z += dwdx;
+                }
+            }
+        }
+    });
+}
+
+/// Stamps the pixels a triangle covers into a mask (no depth), counting newly stamped ones.
+pub(crate) fn fill_mask(
+    mask: &mut [u32],
+    width: usize,
+    height: usize,
+    a: SV,
+    b: SV,
+    c: SV,
+    stamp: u32,
+) -> usize {
+    let mut n = 0;
+    for_spans(a, b, c, width, height, |y, x0, x1| {
+        for m in &mut mask[y * width + x0..y * width + x1] {
+            if *m != stamp {
+                *m = stamp;
+                n += 1;
+            }
+        }
+    });
+    n
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sv(x: f32, y: f32) -> SV {
+        SV { x, y, w: 1.0 }
+    }
+
+    #[test]
+    fn two_triangles_of_a_square_cover_each_pixel_once() {
+        let (w, h) = (16, 16);
+        let mut mask = vec![0u32; w * h];
+        let n1 = fill_mask(&mut mask, w, h, sv(2.0, 2.0), sv(10.0, 2.0), sv(10.0, 10.0), 1);
+        let n2 = fill_mask(&mut mask, w, h, sv(2.0, 2.0), sv(10.0, 10.0), sv(2.0, 10.0), 2);
+        // No pixel of the shared diagonal is claimed by both triangles, none is missed.
+        assert_eq!(n1 + n2, 64);
+        assert_eq!(mask.iter().filter(|m| **m == 1).count(), n1);
+        assert_eq!(mask.iter().filter(|m| **m != 0).count(), 64);
+    }
+
+    #[test]
+    fn depth_test_keeps_nearest() {
+        let (w, h) = (8, 8);
+        let mut rgb = vec![0u8; w * h * 3];
+        let mut depth = vec![0f32; w * h];
+        let mut t = Target { rgb: &mut rgb, width: w, height: h };
+        let mut d = DepthPlanes { depth: &mut depth, ids: None };
+        let far = |x, y| SV { x, y, w: 0.1 };
+        let near = |x, y| SV { x, y, w: 0.5 };
+        fill_depth(&mut t, &mut d, near(0.0, 0.0), near(8.0, 0.0), near(0.0, 8.0), [255, 0, 0], 1);
+        fill_depth(&mut t, &mut d, far(0.0, 0.0), far(8.0, 0.0), far(0.0, 8.0), [0, 255, 0], 2);
+        assert_eq!(&rgb[0..3], &[255, 0, 0]);
+    }
+}

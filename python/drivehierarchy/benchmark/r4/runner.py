@@ -1,0 +1,336 @@
+"""R4 evaluation: drive scenarios with an agent, write append-only results, resume after a crash.
+
+Layout of an output directory:
+
+    manifest.json                     version, git commit, agent, config, seeds, scenario hashes
+    results.jsonl                     one scene score record per finished scenario (append-only)
+    scenes/<category>__<name>/
+        scene_score.json              the protocol's record (+ ours)
+        episode_log.json              route, trajectory and contacts: enough to re-score offline
+        frames/NNNN_front.png, NNNN_bev.png   (--frames)
+        episode.gif                   (--video)
+    summary.csv, summary.md           category means and the R4 score (mean of categories)
+
+A scenario counts as done once its line is in results.jsonl (written last, flushed and synced), so
+a run killed at any point resumes without redoing or losing finished scenarios.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from drivehierarchy import __version__, _core
+from drivehierarchy._core import ConfigError
+from drivehierarchy.agents.base import Agent, ConstantAgent
+from drivehierarchy.agents.expert import ExpertAgent
+from drivehierarchy.envs.config import R4Config
+from drivehierarchy.scenarios import builtin_root
+
+CATEGORIES = (
+    "01_pedestrian",
+    "02_obstacles",
+    "03_turning",
+    "04_intersection",
+    "05_t_intersection",
+    "06_traffic_flow",
+    "07_sudden_brake",
+    "08_merging",
+    "09_yielding",
+    "10_roundabout",
+)
+
+
+class AgentRegistry:
+    """Named agent factories; registering a name twice is an error."""
+
+    def __init__(self) -> None:
+        self._factories: dict[str, Callable[[], Agent]] = {}
+
+    def register(self, name: str, factory: Callable[[], Agent]) -> None:
+        if name in self._factories:
+            raise ValueError(f"agent {name!r} is already registered")
+        self._factories[name] = factory
+
+    def create(self, name: str) -> Agent:
+        try:
+            return self._factories[name]()
+        except KeyError:
+            raise ConfigError(
+                f"config `agent` = {name!r}: unknown agent (known: {', '.join(sorted(self._factories))})"
+            ) from None
+
+    def names(self) -> list[str]:
+        return sorted(self._factories)
+
+
+AGENTS = AgentRegistry()
+AGENTS.register("expert", ExpertAgent)
+AGENTS.register("zero", lambda: ConstantAgent([0.0, 0.0], name="zero"))
+
+
+@dataclass(frozen=True)
+class Job:
+    scenario: Path
+    key: str  # "<category>__<name>", unique in a run
+
+
+@dataclass
+class RunOptions:
+    agent: str = "expert"
+    seed: int = 0
+    frames: bool = False
+    video: bool = False
+    config: R4Config = field(default_factory=R4Config)
+
+
+def scenario_key(path: Path) -> str:
+    return f"{path.parent.name}__{path.stem}"
+
+
+def jobs_for(scenarios: Iterable[Path]) -> list[Job]:
+    jobs, seen = [], set()
+    for p in scenarios:
+        key = scenario_key(p)
+        if key in seen:
+            raise ConfigError(f"config `scenarios` = {p}: two scenarios share the key {key!r}")
+        seen.add(key)
+        jobs.append(Job(scenario=p, key=key))
+    return jobs
+
+
+def suite_scenarios(suite: str) -> list[Path]:
+    """`builtin` (the shipped suite), a folder of `*/*.toml`, or a single file."""
+    root = builtin_root() / "r4" if suite == "builtin" else Path(suite)
+    if root.is_file():
+        return [root]
+    found = sorted(root.glob("*/*.toml")) + sorted(root.glob("*.toml"))
+    if not found:
+        raise ConfigError(f"config `suite` = {suite!r}: no scenario files (*.toml) found under {root}")
+    return found
+
+
+def read_results(out: Path) -> dict[str, dict[str, Any]]:
+    """Finished scenarios of a run by key; a torn last line (killed mid-write) is ignored."""
+    path = out / "results.jsonl"
+    done: dict[str, dict[str, Any]] = {}
+    if not path.exists():
+        return done
+    with path.open("r", encoding="utf-8") as fh:
+        for line in fh:
+            if not line.endswith("\n"):
+                break  # torn write: the scenario is redone
+            try:
+                rec = json.loads(line)
+            except json.JSONDecodeError:
+                continue
+            done.setdefault(rec["key"], rec)
+    return done
+
+
+def _append_line(path: Path, record: dict[str, Any]) -> None:
+    data = json.dumps(record, sort_keys=True) + "\n"
+    with path.open("a", encoding="utf-8") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+def _write_json_atomic(path: Path, obj: Any) -> None:
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(json.dumps(obj, indent=2, sort_keys=True) + "\n", encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def _git_commit() -> str | None:
+    try:
+        out = subprocess.run(
+            ["git", "rev-parse", "HEAD"],
+            cwd=Path(__file__).resolve().parent,
+            capture_output=True,
+            text=True,
+            timeout=5,
+            check=False,
+        )
+    except OSError:
+        return None
+    return out.stdout.strip() or None
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def write_manifest(out: Path, jobs: list[Job], opts: RunOptions) -> None:
+    manifest = {
+        "drivehierarchy_version": __version__,
+        "git_commit": _git_commit(),
+        "agent": opts.agent,
+        "seed": opts.seed,
+        "config": json.loads(opts.config.to_json()),
+        "scenarios": {j.key: {"path": str(j.scenario), "sha256": _sha256(j.scenario)} for j in jobs},
+        "python": sys.version.split()[0],
+        "started_unix": time.time(),
+    }
+    path = out / "manifest.json"
+    if path.exists():
+        old = json.loads(path.read_text(encoding="utf-8"))
+        if old.get("agent") != opts.agent or old.get("seed") != opts.seed:
+            raise ConfigError(
+                f"{path}: field `agent`/`seed` = {old.get('agent')!r}/{old.get('seed')!r}: this output "
+                f"directory belongs to another run (asked: {opts.agent!r}/{opts.seed!r}); use a new --out"
+            )
+        manifest["started_unix"] = old.get("started_unix", manifest["started_unix"])
+        manifest["resumed_unix"] = time.time()
+    _write_json_atomic(path, manifest)
+
+
+def run_scene(job: Job, opts: RunOptions, out: Path) -> dict[str, Any]:
+    """Drives one scenario to its end and writes its files; returns its results line."""
+    from PIL import Image
+
+    from drivehierarchy.agents.base import run_episode
+    from drivehierarchy.envs.r4 import DriveHierarchyR4Env
+
+    config = opts.config
+    want_images = opts.frames or opts.video
+    if not want_images:
+        # Agents that do not look at images (the expert) drive faster without them.
+        config = config.replace(front=None, bev=None)
+    env = DriveHierarchyR4Env(scenario=job.scenario, config=config)
+    agent = AGENTS.create(opts.agent)
+    scene_dir = out / "scenes" / job.key
+    frames_dir = scene_dir / "frames"
+    if opts.frames:
+        frames_dir.mkdir(parents=True, exist_ok=True)
+    scene_dir.mkdir(parents=True, exist_ok=True)
+    gif: list[Any] = []
+
+    def on_step(step: int, obs: dict[str, Any], reward: float, info: dict[str, Any]) -> None:
+        if opts.frames:
+            for key in ("front", "bev"):
+                if key in obs:
+                    Image.fromarray(obs[key]).save(frames_dir / f"{step:04d}_{key}.png")
+        if opts.video and "front" in obs:
+            gif.append(Image.fromarray(obs["front"]).resize((400, 225)))
+
+    t0 = time.perf_counter()
+    result = run_episode(env, agent, seed=opts.seed, on_step=on_step)
+    wall = time.perf_counter() - t0
+    record = dict(result.score)
+    _write_json_atomic(scene_dir / "scene_score.json", record)
+    (scene_dir / "episode_log.json").write_text(env.unwrapped.sim.episode_log(), encoding="utf-8")
+    if gif:
+        gif[0].save(scene_dir / "episode.gif", save_all=True, append_images=gif[1:], duration=250, loop=0)
+    env.close()
+    return {
+        "key": job.key,
+        "scenario": str(job.scenario),
+        "category": job.scenario.parent.name,
+        "agent": opts.agent,
+        "seed": opts.seed,
+        "steps": result.steps,
+        "wall_s": round(wall, 4),
+        "score": record,
+    }
+
+
+def evaluate(
+    scenarios: Iterable[Path], out: Path, opts: RunOptions, *, log: Callable[[str], None] = print
+) -> list[dict[str, Any]]:
+    """Runs every scenario not yet in `out/results.jsonl`; returns all results in suite order."""
+    out.mkdir(parents=True, exist_ok=True)
+    jobs = jobs_for(scenarios)
+    write_manifest(out, jobs, opts)
+    done = read_results(out)
+    for i, job in enumerate(jobs, 1):
+        if job.key in done:
+            log(f"[{i}/{len(jobs)}] {job.key}: done before, skipped")
+            continue
+        line = run_scene(job, opts, out)
+        _append_line(out / "results.jsonl", line)
+        done[job.key] = line
+        s = line["score"]
+        log(
+            f"[{i}/{len(jobs)}] {job.key}: S_R4 {s['score_composed']:.2f} ({s['status']}, "
+            f"{s['termination_reason']}) in {line['wall_s']:.2f} s"
+        )
+    results = [done[j.key] for j in jobs]
+    write_summary(out, results)
+    return results
+
+
+def summarize(results: list[dict[str, Any]]) -> dict[str, Any]:
+    """Category means and the model's R4 score (mean of the categories present)."""
+    by_cat: dict[str, list[float]] = {}
+    for r in results:
+        by_cat.setdefault(r["category"], []).append(float(r["score"]["score_composed"]))
+    cats = {c: float(np.mean(v)) for c, v in sorted(by_cat.items())}
+    return {
+        "categories": cats,
+        "counts": {c: len(v) for c, v in sorted(by_cat.items())},
+        "r4_score": float(np.mean(list(cats.values()))) if cats else 0.0,
+        "scenarios": len(results),
+        "completed": sum(r["score"]["termination_reason"] == "destination_reached" for r in results),
+    }
+
+
+def write_summary(out: Path, results: list[dict[str, Any]]) -> dict[str, Any]:
+    summary = summarize(results)
+    _write_json_atomic(out / "summary.json", summary)
+    rows = ["scenario,category,status,termination_reason,score_route,score_safety,score_efficiency,score_composed"]
+    for r in results:
+        s = r["score"]
+        rows.append(
+            f"{r['key']},{r['category']},{s['status']},{s['termination_reason']},"
+            f"{s['score_route']:.4f},{s['score_safety']:.4f},{s['score_efficiency']:.4f},{s['score_composed']:.4f}"
+        )
+    (out / "summary.csv").write_text("\n".join(rows) + "\n", encoding="utf-8")
+    (out / "summary.md").write_text(summary_table(results, summary), encoding="utf-8")
+    return summary
+
+
+def summary_table(results: list[dict[str, Any]], summary: dict[str, Any] | None = None) -> str:
+    summary = summary or summarize(results)
+    lines = [
+        "| scenario | status | termination | route | safety | efficiency | S_R4 |",
+        "|---|---|---|---:|---:|---:|---:|",
+    ]
+    for r in results:
+        s = r["score"]
+        lines.append(
+            f"| {r['key']} | {s['status']} | {s['termination_reason']} | {s['score_route']:.1f} | "
+            f"{s['score_safety']:.3f} | {s['score_efficiency']:.3f} | {s['score_composed']:.2f} |"
+        )
+    lines += ["", "| category | scenarios | mean S_R4 |", "|---|---:|---:|"]
+    for c, v in summary["categories"].items():
+        lines.append(f"| {c} | {summary['counts'][c]} | {v:.2f} |")
+    lines.append(f"| **R4 (mean of categories)** | {summary['scenarios']} | **{summary['r4_score']:.2f}** |")
+    return "\n".join(lines) + "\n"
+
+
+def rescore_dir(out: Path) -> list[dict[str, Any]]:
+    """Recomputes every scene score of a run from its episode logs, without simulating."""
+    scenes = sorted((out / "scenes").glob("*/episode_log.json"))
+    if not scenes:
+        single = out / "episode_log.json"
+        if single.exists():
+            scenes = [single]
+        else:
+            raise ConfigError(f"{out}: no episode_log.json found (expected scenes/*/episode_log.json)")
+    rescored = []
+    for log_path in scenes:
+        record = json.loads(_core.rescore(log_path.read_text(encoding="utf-8")))
+        _write_json_atomic(log_path.parent / "scene_score.rescored.json", record)
+        rescored.append({"key": log_path.parent.name, "score": record})
+    return rescored

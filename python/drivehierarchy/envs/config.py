@@ -1,0 +1,98 @@
+"""Typed, frozen configuration of the R4 environment (unknown keys are rejected)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+from drivehierarchy._core import ConfigError
+
+ActionMode = Literal["decision", "raw"]
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    """Pinhole front camera; defaults are the protocol's (PROTOCOL §2.1)."""
+
+    width: int = 800
+    height: int = 450
+    fov_deg: float = 100.0
+    mount_forward_m: float = 1.5
+    mount_left_m: float = 0.0
+    mount_height_m: float = 2.4
+    pitch_deg: float = 5.0
+    yaw_deg: float = 0.0
+    supersample: int = 1
+
+
+@dataclass(frozen=True)
+class BevConfig:
+    """Top-down view centred on the ego, forward up; defaults are the protocol's 800×800 at 8 px/m."""
+
+    size_px: int = 800
+    px_per_m: float = 8.0
+
+
+@dataclass(frozen=True)
+class R4Config:
+    """Settings of one `DriveHierarchy-R4` environment.
+
+    `action_mode="decision"`: actions are `[steer, target_speed_mps]` sent through the protocol's
+    actuation bridge (what a VLM outputs). `"raw"`: `[throttle, brake, steer]` applied directly
+    (for RL). Images can be switched off (`front=None`, `bev=None`) for fast state-only runs.
+    """
+
+    scenario: str | None = None
+    action_mode: ActionMode = "decision"
+    decision_interval_ticks: int = 5
+    front: CameraConfig | None = field(default_factory=CameraConfig)
+    bev: BevConfig | None = field(default_factory=BevConfig)
+    prompt: bool = True
+
+    def __post_init__(self) -> None:
+        if self.action_mode not in ("decision", "raw"):
+            raise ConfigError(f"config `action_mode` = {self.action_mode!r}: expected 'decision' or 'raw'")
+        if not isinstance(self.decision_interval_ticks, int) or self.decision_interval_ticks < 1:
+            raise ConfigError(
+                f"config `decision_interval_ticks` = {self.decision_interval_ticks!r}: expected an integer ≥ 1"
+            )
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> R4Config:
+        """Builds a config from plain values, rejecting unknown keys with the key named."""
+        return _from_dict(cls, data, "")
+
+    def to_json(self) -> str:
+        """The form the Rust core reads (the scenario travels separately)."""
+        d = dataclasses.asdict(self)
+        d.pop("scenario")
+        return json.dumps(d)
+
+    def replace(self, **changes: Any) -> R4Config:
+        return dataclasses.replace(self, **changes)
+
+
+def _from_dict(cls: type, data: Any, prefix: str) -> Any:
+    if not isinstance(data, dict):
+        raise ConfigError(f"config `{prefix or cls.__name__}` = {data!r}: expected a table of settings")
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        raise ConfigError(
+            f"config `{prefix}{unknown[0]}` = {data[unknown[0]]!r}: unknown setting "
+            f"(known: {', '.join(sorted(fields))})"
+        )
+    kwargs: dict[str, Any] = {}
+    nested = {"front": CameraConfig, "bev": BevConfig}
+    for key, value in data.items():
+        sub = nested.get(key) if cls is R4Config else None
+        if sub is not None and isinstance(value, dict):
+            kwargs[key] = _from_dict(sub, value, f"{prefix}{key}.")
+        else:
+            kwargs[key] = value
+    try:
+        return cls(**kwargs)
+    except TypeError as exc:
+        raise ConfigError(f"config `{prefix or cls.__name__}`: {exc}") from None

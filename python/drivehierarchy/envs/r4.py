@@ -1,0 +1,167 @@
+"""`DriveHierarchy-R4`: the closed-loop rank as a Gymnasium environment over the Rust world.
+
+One `step()` is one policy decision: the action is held for `decision_interval_ticks` ticks of
+0.05 s (5 → the protocol's 4 Hz). Unlike the original runner, which applies zero control on ticks
+1–4 and first asks the policy at tick 5, this env asks at reset (t = 0): a Gymnasium policy always
+acts on the first observation. Scores are otherwise computed exactly as the protocol says.
+
+Rewards sum to the episode's S_R4 / 100: each step pays the gain in route score, and the last
+step adds the difference between the final composed score and the route score.
+"""
+
+from __future__ import annotations
+
+import string
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from drivehierarchy import _core
+from drivehierarchy._core import ConfigError
+from drivehierarchy.envs.config import R4Config
+from drivehierarchy.scenarios import resolve_scenario
+
+STATE_FIELDS: tuple[str, ...] = tuple(_core.STATE_FIELDS)
+PROMPT_MAX_CHARS = 8192
+# Every character the prompt can contain (digits, letters, punctuation, space, newline).
+PROMPT_CHARSET = frozenset(string.printable)
+
+
+class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
+
+    def __init__(
+        self,
+        scenario: str | Path | None = None,
+        config: R4Config | dict[str, Any] | None = None,
+        render_mode: str | None = None,
+        **overrides: Any,
+    ) -> None:
+        if isinstance(config, dict):
+            config = R4Config.from_dict(config)
+        config = config or R4Config()
+        if overrides:
+            config = R4Config.from_dict({**_shallow(config), **overrides})
+        if scenario is not None:
+            config = config.replace(scenario=str(scenario))
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ConfigError(f"config `render_mode` = {render_mode!r}: expected one of ['rgb_array']")
+        self.config = config
+        self.render_mode = render_mode
+        self._sim: Any = None
+        self._scenario_path: str | None = None
+        self._load(config.scenario)
+
+        obs: dict[str, spaces.Space[Any]] = {}
+        if config.front is not None:
+            obs["front"] = spaces.Box(0, 255, (config.front.height, config.front.width, 3), np.uint8)
+        if config.bev is not None:
+            obs["bev"] = spaces.Box(0, 255, (config.bev.size_px, config.bev.size_px, 3), np.uint8)
+        if config.prompt:
+            obs["prompt"] = spaces.Text(max_length=PROMPT_MAX_CHARS, min_length=0, charset=PROMPT_CHARSET)
+        obs["state"] = spaces.Box(-np.inf, np.inf, (len(STATE_FIELDS),), np.float32)
+        self.observation_space = spaces.Dict(obs)
+        if config.action_mode == "decision":
+            # [steer (negative = left), target_speed_mps]
+            self.action_space = spaces.Box(
+                np.array([-1.0, 0.0], np.float32), np.array([1.0, 30.0], np.float32), dtype=np.float32
+            )
+        else:
+            # [throttle, brake, steer]
+            self.action_space = spaces.Box(
+                np.array([0.0, 0.0, -1.0], np.float32), np.array([1.0, 1.0, 1.0], np.float32), dtype=np.float32
+            )
+        self._last_frame: np.ndarray | None = None
+
+    # -- loading -------------------------------------------------------------------------
+    def _load(self, scenario: str | None) -> None:
+        path = resolve_scenario(scenario)
+        if self._sim is not None and path == self._scenario_path:
+            return
+        self._sim = _core.Sim(path, self.config.to_json())
+        self._scenario_path = path
+
+    @property
+    def scenario_path(self) -> str:
+        assert self._scenario_path is not None
+        return self._scenario_path
+
+    @property
+    def sim(self) -> Any:
+        """The Rust episode (privileged access for experts, runners and tests)."""
+        return self._sim
+
+    # -- Gymnasium API ---------------------------------------------------------------------
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, Any], dict[str, Any]]:
+        super().reset(seed=seed)
+        options = dict(options or {})
+        scenario = options.pop("scenario", None)
+        if options:
+            key = sorted(options)[0]
+            raise ConfigError(f"config `options.{key}` = {options[key]!r}: unknown reset option (known: scenario)")
+        if scenario is not None:
+            self._load(str(scenario))
+        # The world seed comes from the env's np_random so seeding follows Gymnasium semantics.
+        world_seed = int(self.np_random.integers(0, 2**63 - 1))
+        obs, info = self._sim.reset(world_seed)
+        self._last_frame = None
+        return self._shape_obs(obs), info
+
+    def step(self, action: Any) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
+        arr = np.asarray(action, dtype=np.float64)
+        expected = self.action_space.shape
+        if arr.shape != expected:
+            raise ConfigError(f"config `action` = {action!r}: expected shape {expected}, got {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise ConfigError(f"config `action` = {action!r}: contains NaN or infinity")
+        obs, reward, terminated, truncated, info = self._sim.step(arr)
+        self._last_frame = None
+        return self._shape_obs(obs), float(reward), bool(terminated), bool(truncated), info
+
+    def render(self) -> np.ndarray | None:  # type: ignore[override]
+        if self.render_mode != "rgb_array":
+            return None
+        if self._last_frame is None:
+            self._last_frame = self._sim.render("front")
+        return self._last_frame
+
+    def close(self) -> None:
+        self._sim = None
+        self._scenario_path = None
+
+    # -- helpers ---------------------------------------------------------------------------
+    def _shape_obs(self, raw: dict[str, Any]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for key in self.observation_space.spaces:
+            out[key] = raw[key]
+        return out
+
+    def expert_action(self) -> np.ndarray:
+        """The privileged autopilot's action for the current state, in this env's action mode."""
+        return np.asarray(self._sim.expert_action(), dtype=np.float32)
+
+    def score(self) -> dict[str, Any]:
+        """The scene score record so far (final once the episode has terminated)."""
+        return self._sim.score()
+
+    def __getstate__(self) -> dict[str, Any]:
+        # Pickled by config (+ seed on the next reset); the Rust world is rebuilt on load.
+        return {"config": self.config, "render_mode": self.render_mode}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__init__(config=state["config"], render_mode=state["render_mode"])  # type: ignore[misc]
+
+
+def _shallow(config: R4Config) -> dict[str, Any]:
+    import dataclasses
+
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(config):
+        v = getattr(config, f.name)
+        out[f.name] = dataclasses.asdict(v) if dataclasses.is_dataclass(v) else v
+    return out

@@ -1,0 +1,40 @@
+"""Where scenarios live: built-in ones by id, or any scenario file by path."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from drivehierarchy._core import ScenarioError
+
+DEFAULT_SCENARIO = "03_turning/town01_right_turn"
+
+
+def builtin_root() -> Path:
+    """The `scenarios/` folder of the source tree the package was installed from."""
+    return Path(__file__).resolve().parents[2] / "scenarios"
+
+
+def builtin_scenarios() -> list[Path]:
+    """Every built-in R4 scenario file, in suite order (category, then name)."""
+    return sorted((builtin_root() / "r4").glob("*/*.toml"))
+
+
+def scenario_id(path: Path) -> str:
+    """`<category>/<name>` of a built-in scenario file."""
+    return f"{path.parent.name}/{path.stem}"
+
+
+def resolve_scenario(scenario: str | Path | None) -> str:
+    """A scenario path from a path or a built-in id (`03_turning/town01_right_turn`)."""
+    if scenario is None:
+        scenario = DEFAULT_SCENARIO
+    p = Path(scenario)
+    if p.suffix == ".toml" or p.exists():
+        if not p.is_file():
+            raise ScenarioError(f"{p}: scenario file not found")
+        return str(p)
+    candidate = builtin_root() / "r4" / f"{scenario}.toml"
+    if candidate.is_file():
+        return str(candidate)
+    known = ", ".join(scenario_id(q) for q in builtin_scenarios()) or "none"
+    raise ScenarioError(f"scenario `{scenario}`: not a file and not a built-in scenario id (built-in: {known})")
