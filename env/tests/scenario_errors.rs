@@ -1,5 +1,6 @@
 //! Scenario loading: every kind of bad input gives an error naming file, field and value.
 
+use dh_env::geom::Vec2;
 use dh_env::scenario::{validate, Scenario};
 use std::path::PathBuf;
 
@@ -7,17 +8,19 @@ fn fixture_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/world_fixtures")
 }
 
-/// The fixture scenario with `edit` applied, written next to nothing: its map is given by an
-/// absolute path computed at run time.
-fn write_variant(tag: &str, edit: impl Fn(String) -> String) -> PathBuf {
+/// The fixture scenario text with its map given by an absolute path computed at run time.
+fn fixture_text() -> String {
     let base = std::fs::read_to_string(fixture_dir().join("cross.toml")).unwrap();
     let map = fixture_dir().join("cross.net.xml");
-    let text =
-        edit(base.replace("map = \"cross.net.xml\"", &format!("map = {:?}", map.display().to_string())));
+    base.replace("map = \"cross.net.xml\"", &format!("map = {:?}", map.display().to_string()))
+}
+
+/// The fixture scenario with `edit` applied, written to a temporary file.
+fn write_variant(tag: &str, edit: impl Fn(String) -> String) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("dh_scenario_errors_{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let p = dir.join(format!("{tag}.toml"));
-    std::fs::write(&p, text).unwrap();
+    std::fs::write(&p, edit(fixture_text())).unwrap();
     p
 }
 
@@ -139,4 +142,86 @@ fn sumo_map_needs_sumo_home() {
     let p = resolve_map_path(&f, "sumo:cross.net.xml", Some(&fixture_dir())).unwrap();
     assert!(p.ends_with("cross.net.xml"));
     let _ = LoadOptions::default();
+}
+
+#[test]
+fn ego_start_and_destination_alternatives() {
+    let e = err_of("nostart", |t| t.replace("start = { lane = \"W_in_0\", s = 20.0 }\n", ""));
+    assert!(e.contains("ego.start") && e.contains("<missing>"), "{e}");
+    let e = err_of("nodest", |t| t.replace("destination = { lane = \"C_E_0\", s = 80.0 }\n", ""));
+    assert!(e.contains("ego.destination"), "{e}");
+    // route_edges alone: start near the beginning of the first edge, destination near the end of the last.
+    let p = write_variant("edges_only", |t| {
+        t.replace("start = { lane = \"W_in_0\", s = 20.0 }\n", "")
+            .replace("destination = { lane = \"C_E_0\", s = 80.0 }\n", "route_edges = [\"W_in\", \"C_N\"]\n")
+    });
+    let s = Scenario::load(&p).unwrap();
+    assert_eq!(s.ego.route_edges.len(), 2);
+    assert!((s.ego.start.pos.x - 5.0).abs() < 1e-9, "{:?}", s.ego.start);
+    assert!(s.route_length_m() > 200.0);
+    // Start by coordinates snaps to the lane heading.
+    let p = write_variant("xy_start", |t| {
+        t.replace("start = { lane = \"W_in_0\", s = 20.0 }", "start = { x = 30.0, y = 115.5 }")
+    });
+    let s = Scenario::load(&p).unwrap();
+    assert!(s.ego.start.yaw.abs() < 1e-9 && s.ego.start.pos == Vec2::new(30.0, 115.5));
+    let e = err_of("xy_far", |t| {
+        t.replace("start = { lane = \"W_in_0\", s = 20.0 }", "start = { x = 30.0, y = 60.0 }")
+    });
+    assert!(e.contains("ego.start") && e.contains("no drivable lane"), "{e}");
+}
+
+/// Every number of the fixture replaced by awkward values: loading either fails cleanly or
+/// gives a world that ticks without panicking or producing non-finite poses.
+#[test]
+fn awkward_numbers_never_panic() {
+    use dh_env::drive::Control;
+    use dh_env::world::World;
+    let base = fixture_text();
+    // Byte ranges of numeric literals outside comments.
+    let mut spans = Vec::new();
+    let mut offset = 0;
+    for line in base.split_inclusive('\n') {
+        let code = line.split('#').next().unwrap_or("");
+        let b = code.as_bytes();
+        let mut i = 0;
+        while i < b.len() {
+            let starts = (b[i].is_ascii_digit() || b[i] == b'-')
+                && (i == 0 || !(b[i - 1].is_ascii_alphanumeric() || b[i - 1] == b'_'));
+            if starts && !code[..i].ends_with('"') && code[..i].matches('"').count() % 2 == 0 {
+                let j = i + code[i..]
+                    .find(|c: char| !(c.is_ascii_digit() || c == '.' || c == '-'))
+                    .unwrap_or(code.len() - i);
+                if code[i..j].chars().any(|c| c.is_ascii_digit()) {
+                    spans.push((offset + i, offset + j));
+                }
+                i = j;
+            } else {
+                i += 1;
+            }
+        }
+        offset += line.len();
+    }
+    assert!(spans.len() > 20, "{}", spans.len());
+    let mut loaded = 0;
+    for (k, &(a, b)) in spans.iter().enumerate() {
+        for (m, v) in ["nan", "inf", "-1.0", "0", "1e300", "-0.0"].iter().enumerate() {
+            let text = format!("{}{}{}", &base[..a], v, &base[b..]);
+            let p = write_variant(&format!("awk_{k}_{m}"), |_| text.clone());
+            let Ok(s) = Scenario::load(&p) else { continue };
+            loaded += 1;
+            let mut w = World::new(&s, 0).unwrap();
+            for _ in 0..40 {
+                let r = w.tick(&Control { throttle: 1.0, brake: 0.0, steer: 0.2 }).unwrap();
+                assert!(r.ego.pose.pos.is_finite());
+                for a in w.actors() {
+                    assert!(
+                        a.pose.pos.is_finite() && a.pose.yaw.is_finite() && a.speed_mps.is_finite(),
+                        "{k} {v}: {a:?}"
+                    );
+                }
+            }
+        }
+    }
+    assert!(loaded > 0);
 }

@@ -193,6 +193,25 @@ fn drive(s: &ResolvedScenario, careful: bool, bridge: bool) -> Outcome {
                 }
             }
         }
+        // Cross traffic: a moving vehicle whose straight-line future enters the path ahead about
+        // when the ego would get there is treated as an obstacle at that point (gap acceptance).
+        for a in w.actors().iter().filter(|a| a.speed_mps > 0.5 && a.kind != ActorKind::Pedestrian) {
+            let window = route.slice(progress, progress + 40.0);
+            let reach = 0.5 * a.width_m + 0.5 * p.width_m + 0.8;
+            for k in 1..=16 {
+                let t = 0.25 * k as f64;
+                let at = a.pose.pos + Vec2::from_angle(a.pose.yaw) * (a.speed_mps * t);
+                let Some(q) = window.project(at) else { break };
+                if (q.lateral - offset).abs() >= reach || q.s < half_len {
+                    continue;
+                }
+                let arrival = (q.s - half_len) / v.max(2.0);
+                if (arrival - t).abs() < 1.5 {
+                    gap = gap.min(q.s - half_len - 0.5 * a.width_m - 1.0);
+                }
+                break;
+            }
+        }
         if !careful {
             gap = f64::INFINITY;
             blocked_static_at = None;
@@ -260,8 +279,11 @@ fn drive(s: &ResolvedScenario, careful: bool, bridge: bool) -> Outcome {
         let r = w.tick(&c).unwrap();
         let contacts: Vec<Contact> =
             r.contacts.iter().map(|&(actor_id, class)| Contact { actor_id, class }).collect();
-        let tick =
-            TickInput { contacts: &contacts, ..TickInput::new(r.ego.pose.pos, r.ego.speed_mps, r.on_road) };
+        let tick = TickInput {
+            contacts: &contacts,
+            red_light: r.ran_red_light,
+            ..TickInput::new(r.ego.pose.pos, r.ego.speed_mps, r.on_road)
+        };
         if let Some(t) = tracker.update(&tick) {
             let score = tracker.finish(&RunInfo { scene_id: s.id.clone(), ..Default::default() });
             let reason = match contacts.first() {
@@ -304,7 +326,8 @@ fn every_scenario_is_drivable() {
 #[test]
 fn blind_driver_crashes_in_hazard_scenarios() {
     for s in load_all() {
-        if !["01_pedestrian", "02_obstacles", "07_sudden_brake"].contains(&s.category.as_str()) {
+        if !["01_pedestrian", "02_obstacles", "07_sudden_brake", "09_yielding"].contains(&s.category.as_str())
+        {
             continue;
         }
         let o = drive(&s, false, false);

@@ -492,7 +492,13 @@ fn resolve_ego(ctx: &Ctx<'_>, spec: &EgoSpec) -> Result<ResolvedEgo> {
             let len = map.lanes[lane].shape.length();
             (map.lane_position(lane, (0.25 * len).min(5.0)), lane)
         }
-        (None, None) => unreachable!("checked above"),
+        (None, None) => {
+            return Err(ctx.err(
+                "ego.start",
+                "<missing>",
+                "give `start` (or `route_edges` to start on its first edge)",
+            ))
+        }
     };
     let start_edge = map.lanes[start_lane].edge;
     // Destination.
@@ -508,7 +514,9 @@ fn resolve_ego(ctx: &Ctx<'_>, spec: &EgoSpec) -> Result<ResolvedEgo> {
             let len = map.lanes[lane].shape.length();
             (map.lane_position(lane, len - (0.25 * len).min(5.0)).pos, last)
         }
-        (None, None) => unreachable!("checked above"),
+        (None, None) => {
+            return Err(ctx.err("ego.destination", "<missing>", "give `destination` or `route_edges`"))
+        }
     };
     // Route edges.
     let edges = match &chain {

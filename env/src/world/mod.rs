@@ -66,6 +66,9 @@ pub struct TickReport {
     pub on_road: bool,
     /// Actors whose start trigger fired during this tick.
     pub triggered: Vec<u32>,
+    /// The ego centre crossed the stop line of a red signal head during this tick (heading
+    /// within 60° of the lane, laterally within the lane width).
+    pub ran_red_light: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -209,6 +212,7 @@ impl World {
         let c = sanitize_control(control)?;
         // 2. Ego.
         let prev_speed = self.ego.speed_mps;
+        let prev_pos = self.ego.pose.pos;
         self.ego = step_bicycle(&self.params, &self.ego, &c, DT_S);
         self.ego_view.pose = self.ego.pose;
         self.ego_view.speed_mps = self.ego.speed_mps;
@@ -216,8 +220,9 @@ impl World {
         // 3. Time.
         self.tick += 1;
         let t = self.time_s();
-        // 4. Lights.
+        // 4. Lights, then red-light running by the ego centre.
         self.lights.update(t);
+        let ran_red_light = crossed_red_stop_line(self.lights.views(), prev_pos, self.ego.pose);
         // 5. Actors.
         let mut triggered = Vec::new();
         let ego_pos = self.ego.pose.pos;
@@ -273,6 +278,7 @@ impl World {
             contacts,
             on_road,
             triggered,
+            ran_red_light,
         })
     }
 
@@ -395,6 +401,22 @@ impl World {
     pub fn seed(&self) -> u64 {
         self.seed
     }
+}
+
+/// Whether the segment `from` → `to.pos` crosses the stop line of a red head in its direction.
+fn crossed_red_stop_line(heads: &[TrafficLightView], from: Vec2, to: Pose) -> bool {
+    heads.iter().any(|h| {
+        if h.color != LightColor::Red || to.pos.dist_sq(h.stop_line.pos) > 100.0 {
+            return false;
+        }
+        let f = h.stop_line.forward();
+        let (da, db) = ((from - h.stop_line.pos).dot(f), (to.pos - h.stop_line.pos).dot(f));
+        let lateral = (to.pos - h.stop_line.pos).dot(f.perp());
+        da < 0.0
+            && db >= 0.0
+            && lateral.abs() <= 0.5 * h.lane_width_m
+            && (to.yaw - h.stop_line.yaw).cos() > 0.5
+    })
 }
 
 /// One scripted-actor step; returns true when the actor leaves the world.
