@@ -20,7 +20,7 @@
 use dh_env::geom::{wrap_angle, Polyline, Pose, Projection, Vec2};
 use dh_env::map::{LaneIdx, Network};
 use dh_env::view::{ActorKind, ActorView, LightColor, TrafficLightView};
-use dh_env::world::World;
+use dh_env::world::{VehicleParams, World};
 use smallvec::SmallVec;
 
 /// Tuning of the expert. Defaults are the values the closed-loop tests were tuned with.
@@ -74,6 +74,9 @@ pub struct ExpertParams {
     /// A predicted (not current) corridor intrusion only matters if the ego could be there no
     /// later than this after it (earlier passages are clear).
     pub conflict_slack_s: f64,
+    /// A predicted intrusion is ignored when the ego, at its current speed, has cleared that
+    /// spot at least this long before the actor gets there, s.
+    pub pass_margin_s: f64,
     /// Acceleration assumed when estimating how soon the ego reaches a conflict point, m/s².
     pub arrival_accel_mps2: f64,
     /// Protocol: speed < 1 km/h for more than 100 ticks ends the episode (blocked). After
@@ -118,6 +121,7 @@ impl Default for ExpertParams {
             prediction_horizon_s: 3.0,
             prediction_step_s: 0.5,
             conflict_slack_s: 1.5,
+            pass_margin_s: 1.0,
             arrival_accel_mps2: 2.5,
             stall_guard_s: 3.5,
             creep_speed_mps: 0.8,
@@ -164,6 +168,7 @@ impl ExpertParams {
             ("time_headway_s", self.time_headway_s),
             ("prediction_horizon_s", self.prediction_horizon_s),
             ("conflict_slack_s", self.conflict_slack_s),
+            ("pass_margin_s", self.pass_margin_s),
             ("stall_guard_s", self.stall_guard_s),
             ("creep_speed_mps", self.creep_speed_mps),
             ("creep_min_gap_m", self.creep_min_gap_m),
@@ -847,6 +852,15 @@ impl Expert {
                     if t + p.conflict_slack_s < t_arr {
                         continue;
                     }
+                    // Braking for an actor that would only get there after the ego has cleared
+                    // the spot would leave the ego standing in its way: keep going.
+                    if v > 2.0 {
+                        let extent = a.length_m.max(a.width_m) + 2.0 * p.corridor_margin_m;
+                        let t_clear = (d + extent + ego.length_m) / v;
+                        if t >= t_clear + p.pass_margin_s {
+                            break;
+                        }
+                    }
                 }
                 let along = wrap_angle(a.pose.yaw - route_heading(route, s_hit.max(s_front)));
                 let is_vehicle = !a.kind.is_static() && a.kind != ActorKind::Pedestrian;
@@ -1076,9 +1090,23 @@ pub fn network_speed_limit(net: &Network, p: Vec2) -> Option<f64> {
 }
 
 impl Expert {
-    /// One decision from a live [`World`]: its ego, actors and lights, the lane speed limit and
-    /// the map's drivable-area oracle. `route` is the scenario's ego route.
+    /// Takes the steering geometry (wheelbase, rear axle → centre, maximum road-wheel angle)
+    /// from the world's ego vehicle parameters. Values that would fail validation are ignored.
+    pub fn set_vehicle(&mut self, v: &VehicleParams) {
+        let mut p = self.params.clone();
+        p.wheelbase_m = v.wheelbase_m;
+        p.rear_to_center_m = v.rear_axle_to_center_m;
+        p.max_wheel_angle_rad = v.max_steer_deg.to_radians();
+        if p.validate().is_ok() {
+            self.params = p;
+        }
+    }
+
+    /// One decision from a live [`World`]: its ego (and its steering geometry, see
+    /// [`Expert::set_vehicle`]), actors and lights, the lane speed limit and the map's
+    /// drivable-area oracle. `route` is the scenario's ego route.
     pub fn act_in_world(&mut self, world: &World, route: &Polyline) -> ExpertAction {
+        self.set_vehicle(world.vehicle_params());
         let net = world.map();
         let ego = *world.ego();
         let oracle = network_drivable(net);

@@ -7,11 +7,10 @@
 
 use dh_agents::expert::{Expert, ExpertParams, SpeedReason};
 use dh_env::drive::bridge::{ActuationBridge, Decision};
-use dh_env::geom::Vec2;
 use dh_env::scenario::{LoadOptions, ResolvedScenario, Scenario};
-use dh_env::view::ContactClass;
+use dh_env::score::{Contact, RunInfo, ScoreParams, ScoreTracker, TerminationReason, TickInput};
 use dh_env::world::{Control, World};
-use dh_env::{DECISION_INTERVAL_TICKS, DT_S};
+use dh_env::DECISION_INTERVAL_TICKS;
 use std::path::{Path, PathBuf};
 
 fn repo_root() -> PathBuf {
@@ -52,44 +51,49 @@ fn uses_sumo_map(p: &Path) -> bool {
 }
 
 #[derive(Debug)]
-struct Score {
-    reason: &'static str,
+struct Run {
+    reason: TerminationReason,
     time_s: f64,
     travel_m: f64,
     offroad_s: f64,
     s_route: f64,
     s_safety: f64,
     s_eff: f64,
+    s_r4: f64,
+    red_lights_run: u32,
     /// Decisions limited by an actor / a lead / a light, and the largest detour offset.
     obstacle_decisions: u32,
     lead_decisions: u32,
     light_decisions: u32,
     max_offset_m: f64,
+    /// Mean wall time of one expert decision (this build's profile), µs.
+    decision_us: f64,
 }
 
-impl Score {
-    fn total(&self) -> f64 {
-        self.s_route * self.s_safety * self.s_eff
-    }
-}
-
-/// Drives one scenario with the expert and scores it per §2.4–2.5.
-fn run(s: &ResolvedScenario) -> Score {
-    let mut world = World::new(s, 0).unwrap();
+/// Drives one scenario with the expert; scored by the protocol's score tracker.
+fn run(s: &ResolvedScenario) -> Run {
+    let mut world = World::new(s, s.seed).unwrap();
     let mut bridge = ActuationBridge::new();
     let mut expert = Expert::new(ExpertParams::default()).unwrap();
     let route = &s.ego.route;
-    let l = route.length();
-    let t_ref = s.reference_duration_s();
-    let (mut best, mut travel, mut offroad_s, mut off_run, mut still) = (0.0f64, 0.0, 0.0, 0.0, 0u32);
+    let mut tracker = ScoreTracker::new(
+        route.clone(),
+        s.ego.start.pos,
+        s.ego.destination,
+        s.reference_duration_given_s,
+        ScoreParams::default(),
+    )
+    .unwrap();
     let mut control = Control::default();
-    let mut last: Vec2 = world.ego().pose.pos;
-    let mut tick: u64 = 0;
-    let (mut obstacle_decisions, mut lead_decisions, mut light_decisions, mut max_offset_m) =
-        (0, 0, 0, 0.0f64);
-    let (reason, penalty) = loop {
-        if tick % DECISION_INTERVAL_TICKS as u64 == 0 {
+    let (mut obstacle_decisions, mut lead_decisions, mut light_decisions) = (0, 0, 0);
+    let (mut max_offset_m, mut red_lights_run, mut decisions) = (0.0f64, 0, 0u32);
+    let mut think = std::time::Duration::ZERO;
+    loop {
+        if world.tick_count() % DECISION_INTERVAL_TICKS as u64 == 0 {
+            let t0 = std::time::Instant::now();
             let a = expert.act_in_world(&world, route);
+            think += t0.elapsed();
+            decisions += 1;
             match a.reason {
                 SpeedReason::Obstacle { .. } => obstacle_decisions += 1,
                 SpeedReason::Lead { .. } => lead_decisions += 1,
@@ -101,62 +105,33 @@ fn run(s: &ResolvedScenario) -> Score {
             control = Control { throttle: c.throttle, brake: c.brake, steer: c.steer };
         }
         let r = world.tick(&control).unwrap();
-        tick += 1;
-        let pos = r.ego.pose.pos;
-        travel += pos.dist(last);
-        last = pos;
-        if !r.on_road {
-            offroad_s += DT_S;
-            off_run += DT_S;
-        } else {
-            off_run = 0.0;
-            if let Some(pr) = route.project(pos) {
-                if pr.distance <= 6.0 {
-                    best = best.max(pr.s.min(best + 20.0));
-                }
-            }
-        }
-        let at_dest = pos.dist(s.ego.destination) <= 8.0;
-        if at_dest {
-            best = l;
-        }
-        if let Some(&(_, class)) = r.contacts.first() {
-            break match class {
-                ContactClass::Pedestrian => ("collision_pedestrian", 0.0),
-                ContactClass::Vehicle => ("collision_vehicle", 0.2),
-                ContactClass::Static => ("collision_static", 0.3),
+        let contacts: Vec<Contact> =
+            r.contacts.iter().map(|&(actor_id, class)| Contact { actor_id, class }).collect();
+        red_lights_run += u32::from(r.ran_red_light);
+        let tick = TickInput {
+            contacts: &contacts,
+            red_light: r.ran_red_light,
+            ..TickInput::new(r.ego.pose.pos, r.ego.speed_mps, r.on_road)
+        };
+        if let Some(t) = tracker.update(&tick) {
+            let score = tracker.finish(&RunInfo { scene_id: s.id.clone(), ..Default::default() });
+            return Run {
+                reason: t.reason,
+                time_s: t.time_s,
+                travel_m: tracker.travel_m(),
+                offroad_s: tracker.offroad_time_s(),
+                s_route: score.score_route,
+                s_safety: score.score_safety,
+                s_eff: score.score_efficiency,
+                s_r4: score.score_composed,
+                red_lights_run,
+                obstacle_decisions,
+                lead_decisions,
+                light_decisions,
+                max_offset_m,
+                decision_us: think.as_secs_f64() * 1e6 / f64::from(decisions.max(1)),
             };
         }
-        if off_run >= 1.5 - 1e-9 {
-            break ("offroad_timeout", 0.0);
-        }
-        if at_dest {
-            break ("destination_reached", 1.0);
-        }
-        still = if r.ego.speed_mps < 1.0 / 3.6 { still + 1 } else { 0 };
-        if still > 100 {
-            break ("blocked_timeout", 0.7);
-        }
-        if r.time_s >= 2.0 * t_ref - 1e-9 {
-            break ("scenario_timeout", 0.7);
-        }
-    };
-    let duration = tick as f64 * DT_S;
-    let s_route = if reason == "destination_reached" { 100.0 } else { (100.0 * best / l).clamp(0.0, 100.0) };
-    let s_safety = (penalty * (1.0 - offroad_s / duration)).clamp(0.0, 1.0);
-    let s_eff = 0.7 * (1.10 * l / travel.max(1e-9)).min(1.0) + 0.3 * (1.50 * t_ref / duration).min(1.0);
-    Score {
-        reason,
-        time_s: duration,
-        travel_m: travel,
-        offroad_s,
-        s_route,
-        s_safety,
-        s_eff,
-        obstacle_decisions,
-        lead_decisions,
-        light_decisions,
-        max_offset_m,
     }
 }
 
@@ -175,7 +150,7 @@ fn expert_scores_at_least_90_on_every_project_scenario() {
         let sc = run(&s);
         n += 1;
         println!(
-            "{:38} {:20} t={:5.1}s (T_ref {:5.1}) travel {:6.1}/{:6.1} m offroad {:.2}s  route {:5.1} safety {:.2} eff {:.3}  S_R4 {:5.1}  [obst {} lead {} light {} offset {:.1} m]",
+            "{:36} {:?} t={:5.1}s (T_ref {:5.1}) travel {:6.1}/{:6.1} m offroad {:.2}s route {:5.1} safety {:.2} eff {:.3} S_R4 {:5.1} [obst {} lead {} light {} offset {:.1} m, red run {}, {:.0} µs/decision]",
             s.id,
             sc.reason,
             sc.time_s,
@@ -186,13 +161,15 @@ fn expert_scores_at_least_90_on_every_project_scenario() {
             sc.s_route,
             sc.s_safety,
             sc.s_eff,
-            sc.total(),
+            sc.s_r4,
             sc.obstacle_decisions,
             sc.lead_decisions,
             sc.light_decisions,
-            sc.max_offset_m
+            sc.max_offset_m,
+            sc.red_lights_run,
+            sc.decision_us
         );
-        if sc.total() < 90.0 {
+        if sc.s_r4 < 90.0 || sc.red_lights_run > 0 {
             failures.push(format!("{}: {sc:?}", s.id));
         }
     }

@@ -52,3 +52,31 @@ fn town01_all_routes_stay_on_road() {
     println!("town01: {runs} routes, worst efficiency {worst_eff:.3}, worst lateral error {worst_lat:.2} m");
     assert!(runs > 30, "only {runs} routes");
 }
+
+#[test]
+fn drivable_oracle_rejects_oncoming_lanes() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/maps/town01/town01.net.xml");
+    if !path.exists() {
+        eprintln!("skipping: {} not found", path.display());
+        return;
+    }
+    let net = Network::from_file(&path).unwrap();
+    let oracle = dh_agents::expert::network_drivable(&net);
+    // Mid-lane points of every lane of the 400 m straight: usable along the lane's direction,
+    // not against it.
+    let mut checked = 0;
+    for id in ["C2T_1", "C2T_2", "T2C_1", "T2C_2"] {
+        let lane = &net.lanes[net.lane_by_id(id).unwrap()];
+        let s = lane.shape.length() * 0.5;
+        let (p, h) = (lane.shape.point_at(s), lane.shape.heading_at(s));
+        assert!(oracle(p, h), "{id} along");
+        assert!(!oracle(p, h + std::f64::consts::PI), "{id} against");
+        checked += 1;
+    }
+    assert_eq!(checked, 4);
+    // Lane 0 of the main roads is the sidewalk.
+    let walk = &net.lanes[net.lane_by_id("C2T_0").unwrap()];
+    let s = walk.shape.length() * 0.5;
+    assert!(!oracle(walk.shape.point_at(s), walk.shape.heading_at(s)), "sidewalk");
+    assert!(!oracle(dh_env::geom::Vec2::new(-5000.0, -5000.0), 0.0));
+}

@@ -121,6 +121,9 @@ pub struct Sim {
     pub per_tick_bridge: bool,
     pub drivable: Option<Box<dyn Fn(Vec2, f64) -> bool>>,
     pub speed_limit: Option<f64>,
+    /// (actor index, ego x): that actor stands still until the ego centre reaches x; its speed
+    /// function then gets the time since that moment.
+    pub triggers: Vec<(usize, f64)>,
 }
 
 impl Sim {
@@ -134,6 +137,7 @@ impl Sim {
             per_tick_bridge: true,
             drivable: None,
             speed_limit: None,
+            triggers: Vec::new(),
         }
     }
 
@@ -177,11 +181,23 @@ impl Sim {
         };
         let mut actors: Vec<ActorView> = self.actors.iter().map(|a| a.view).collect();
         let mut rest = 0.0;
+        let mut fired: Vec<Option<f64>> = vec![None; self.actors.len()];
         let mut tick: u64 = 0;
         while (tick as f64) * DT < self.time_limit_s {
             let t = tick as f64 * DT;
-            for (a, s) in actors.iter_mut().zip(&self.actors) {
-                a.speed_mps = (s.speed)(t);
+            for (i, (a, s)) in actors.iter_mut().zip(&self.actors).enumerate() {
+                a.speed_mps = match self.triggers.iter().find(|(k, _)| *k == i) {
+                    None => (s.speed)(t),
+                    Some(_) => match fired[i] {
+                        Some(t0) => (s.speed)(t - t0),
+                        None => 0.0,
+                    },
+                };
+            }
+            for &(k, x) in &self.triggers {
+                if fired[k].is_none() && pose.pos.x >= x {
+                    fired[k] = Some(t);
+                }
             }
             let ego = ego_at(pose.pos, pose.yaw, v);
             if tick % 5 == 0 {
