@@ -1,3 +1,4 @@
 //! `dh-agents`: policies that must be fast or fuzzable.
 
+pub mod expert;
 pub mod vlm;

@@ -1,0 +1,1129 @@
+//! The privileged expert autopilot for R4.
+//!
+//! It sees the world state (ego, other actors, lights, the full route) but acts through exactly the
+//! interface a VLM gets: one `(steer, target_speed_mps)` decision every 5 ticks (4 Hz), passed
+//! through the protocol's actuation bridge (steer clipped to [-1, 1] and rate-limited to ±0.12 per
+//! decision; target speed turned into throttle/brake by a P-law). So it is scored on the same
+//! routes and interface as the models it is compared with.
+//!
+//! * Lateral: pure pursuit from the rear axle (where the bicycle's velocity is along the heading,
+//!   so `tan δ = L κ` holds exactly) on the route, evaluated on the pose predicted half a hold
+//!   ahead; the command is kept inside the window from which the steer needed at each of the next
+//!   decisions is still reachable under the bridge's rate limit (pre-steering before curves).
+//! * Longitudinal: the minimum of cruise, the speed limit, a curve-speed profile (lateral
+//!   acceleration and steer-rate bounds, braked into at a comfortable deceleration), stops before
+//!   actors predicted in the route corridor, stops before red / yellow lights, and a time-headway
+//!   law behind a lead vehicle.
+//! * Optional local planner: with a drivable-area oracle, a static obstacle blocking the route is
+//!   passed by offsetting the pursuit path laterally into free drivable space.
+
+use dh_env::geom::{wrap_angle, Polyline, Pose, Projection, Vec2};
+use dh_env::map::{LaneIdx, Network};
+use dh_env::view::{ActorKind, ActorView, LightColor, TrafficLightView};
+use dh_env::world::{VehicleParams, World};
+use smallvec::SmallVec;
+
+/// Tuning of the expert. Defaults are the values the closed-loop tests were tuned with.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExpertParams {
+    /// Speed on a free straight road, m/s.
+    pub cruise_speed_mps: f64,
+    /// Lateral acceleration allowed in curves, m/s²: `v ≤ √(a_lat / κ)`.
+    pub max_lat_accel_mps2: f64,
+    /// Deceleration used to plan stops and curve entries, m/s².
+    pub comfort_decel_mps2: f64,
+    /// Pure-pursuit lookahead `Ld = lookahead_base_m + lookahead_gain_s · v`, clamped to
+    /// `[lookahead_min_m, lookahead_max_m]`.
+    pub lookahead_base_m: f64,
+    pub lookahead_gain_s: f64,
+    pub lookahead_min_m: f64,
+    pub lookahead_max_m: f64,
+    /// The pose used for steering is predicted this far ahead (≈ half the 0.25 s hold).
+    pub steer_preview_s: f64,
+    /// Ego kinematic bicycle: wheelbase, rear axle → reference (centre), road-wheel angle at
+    /// |steer| = 1.
+    pub wheelbase_m: f64,
+    pub rear_to_center_m: f64,
+    pub max_wheel_angle_rad: f64,
+    /// Bridge: maximum steer change per decision, and the decision period.
+    pub steer_rate_per_decision: f64,
+    pub decision_period_s: f64,
+    /// Decisions ahead over which steer reachability is enforced (pre-steering).
+    pub presteer_decisions: usize,
+    /// Decisions simulated when choosing the steer among the reachable ones (0 = plain base law),
+    /// and the weight (m) of the heading error against the lateral error in that rollout.
+    pub rollout_decisions: usize,
+    pub rollout_heading_weight_m: f64,
+    /// Steer-rate curve bound uses this fraction of the bridge's steer rate (headroom for
+    /// tracking corrections).
+    pub steer_rate_usage: f64,
+    /// Extra clearance beyond the two half widths for an actor to count as in the corridor, m.
+    pub corridor_margin_m: f64,
+    /// Gap kept to a stopped obstacle / lead vehicle (front bumper to its nearest point), m.
+    pub stop_gap_m: f64,
+    /// Front bumper stops this far before a red light's stop line, m.
+    pub light_stop_margin_m: f64,
+    /// Yellow is run through when stopping would need more than this deceleration, m/s².
+    pub yellow_max_decel_mps2: f64,
+    /// Time headway behind a lead vehicle, s.
+    pub time_headway_s: f64,
+    /// Actor motion is extrapolated (constant speed and heading) over this horizon, sampled at
+    /// `prediction_step_s`.
+    pub prediction_horizon_s: f64,
+    pub prediction_step_s: f64,
+    /// A predicted (not current) corridor intrusion only matters if the ego could be there no
+    /// later than this after it (earlier passages are clear).
+    pub conflict_slack_s: f64,
+    /// A predicted intrusion is ignored when the ego, at its current speed, has cleared that
+    /// spot at least this long before the actor gets there, s.
+    pub pass_margin_s: f64,
+    /// Acceleration assumed when estimating how soon the ego reaches a conflict point, m/s².
+    pub arrival_accel_mps2: f64,
+    /// Protocol: speed < 1 km/h for more than 100 ticks ends the episode (blocked). After
+    /// `stall_guard_s` at rest the expert creeps (one decision at `creep_speed_mps`) toward the
+    /// light or standing actor holding it, down to `creep_min_gap_m` before it (twice that for
+    /// pedestrians). Lights are therefore first approached to `light_stop_margin_m`.
+    pub stall_guard_s: f64,
+    pub creep_speed_mps: f64,
+    pub creep_min_gap_m: f64,
+    /// Local planner: lateral offsets tried (absolute values, m, ascending), ramp length per m/s
+    /// of speed and its minimum, m.
+    pub avoid_offsets_m: Vec<f64>,
+    pub avoid_ramp_per_mps: f64,
+    pub avoid_ramp_min_m: f64,
+}
+
+impl Default for ExpertParams {
+    fn default() -> Self {
+        Self {
+            cruise_speed_mps: 12.0,
+            max_lat_accel_mps2: 2.5,
+            comfort_decel_mps2: 2.5,
+            lookahead_base_m: 3.0,
+            lookahead_gain_s: 0.55,
+            lookahead_min_m: 3.5,
+            lookahead_max_m: 15.0,
+            steer_preview_s: 0.125,
+            wheelbase_m: 2.9,
+            rear_to_center_m: 1.45,
+            max_wheel_angle_rad: 35f64.to_radians(),
+            steer_rate_per_decision: 0.12,
+            decision_period_s: 0.25,
+            presteer_decisions: 8,
+            steer_rate_usage: 0.7,
+            rollout_decisions: 10,
+            rollout_heading_weight_m: 2.0,
+            corridor_margin_m: 0.5,
+            stop_gap_m: 3.5,
+            light_stop_margin_m: 4.0,
+            yellow_max_decel_mps2: 3.5,
+            time_headway_s: 1.5,
+            prediction_horizon_s: 3.0,
+            prediction_step_s: 0.5,
+            conflict_slack_s: 1.5,
+            pass_margin_s: 1.0,
+            arrival_accel_mps2: 2.5,
+            stall_guard_s: 3.5,
+            creep_speed_mps: 0.8,
+            creep_min_gap_m: 1.0,
+            avoid_offsets_m: vec![1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0],
+            avoid_ramp_per_mps: 2.0,
+            avoid_ramp_min_m: 10.0,
+        }
+    }
+}
+
+impl ExpertParams {
+    /// Checks every value is finite and in range; the error names the field and value.
+    pub fn validate(&self) -> dh_env::Result<()> {
+        let positive = [
+            ("cruise_speed_mps", self.cruise_speed_mps),
+            ("max_lat_accel_mps2", self.max_lat_accel_mps2),
+            ("comfort_decel_mps2", self.comfort_decel_mps2),
+            ("lookahead_min_m", self.lookahead_min_m),
+            ("lookahead_max_m", self.lookahead_max_m),
+            ("wheelbase_m", self.wheelbase_m),
+            ("max_wheel_angle_rad", self.max_wheel_angle_rad),
+            ("steer_rate_per_decision", self.steer_rate_per_decision),
+            ("decision_period_s", self.decision_period_s),
+            ("steer_rate_usage", self.steer_rate_usage),
+            ("prediction_step_s", self.prediction_step_s),
+            ("arrival_accel_mps2", self.arrival_accel_mps2),
+            ("yellow_max_decel_mps2", self.yellow_max_decel_mps2),
+            ("avoid_ramp_min_m", self.avoid_ramp_min_m),
+        ];
+        for (field, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(dh_env::Error::config(field, v, "must be a finite number > 0"));
+            }
+        }
+        let non_negative = [
+            ("lookahead_base_m", self.lookahead_base_m),
+            ("lookahead_gain_s", self.lookahead_gain_s),
+            ("steer_preview_s", self.steer_preview_s),
+            ("rear_to_center_m", self.rear_to_center_m),
+            ("corridor_margin_m", self.corridor_margin_m),
+            ("stop_gap_m", self.stop_gap_m),
+            ("light_stop_margin_m", self.light_stop_margin_m),
+            ("time_headway_s", self.time_headway_s),
+            ("prediction_horizon_s", self.prediction_horizon_s),
+            ("conflict_slack_s", self.conflict_slack_s),
+            ("pass_margin_s", self.pass_margin_s),
+            ("stall_guard_s", self.stall_guard_s),
+            ("creep_speed_mps", self.creep_speed_mps),
+            ("creep_min_gap_m", self.creep_min_gap_m),
+            ("avoid_ramp_per_mps", self.avoid_ramp_per_mps),
+            ("rollout_heading_weight_m", self.rollout_heading_weight_m),
+        ];
+        for (field, v) in non_negative {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(dh_env::Error::config(field, v, "must be a finite number ≥ 0"));
+            }
+        }
+        if self.lookahead_min_m > self.lookahead_max_m {
+            return Err(dh_env::Error::config(
+                "lookahead_min_m",
+                self.lookahead_min_m,
+                format!("must not exceed lookahead_max_m = {}", self.lookahead_max_m),
+            ));
+        }
+        if self.max_wheel_angle_rad >= std::f64::consts::FRAC_PI_2 {
+            return Err(dh_env::Error::config(
+                "max_wheel_angle_rad",
+                self.max_wheel_angle_rad,
+                "must be < π/2",
+            ));
+        }
+        if self.rear_to_center_m > self.wheelbase_m {
+            return Err(dh_env::Error::config(
+                "rear_to_center_m",
+                self.rear_to_center_m,
+                format!("must not exceed wheelbase_m = {}", self.wheelbase_m),
+            ));
+        }
+        if let Some(bad) = self.avoid_offsets_m.iter().find(|o| !(o.is_finite() && **o > 0.0)) {
+            return Err(dh_env::Error::config("avoid_offsets_m", bad, "offsets must be finite and > 0"));
+        }
+        Ok(())
+    }
+}
+
+/// Everything the expert sees at one decision (world frame; the ego is not among `actors`).
+#[derive(Clone, Copy)]
+pub struct ExpertInput<'a> {
+    pub ego: &'a ActorView,
+    /// The full ego route (lane centrelines through junctions), start to destination.
+    pub route: &'a Polyline,
+    pub actors: &'a [ActorView],
+    pub lights: &'a [TrafficLightView],
+    /// Legal speed on the ego's lane, if known.
+    pub speed_limit_mps: Option<f64>,
+    /// Optional drivable-area oracle: `drivable(point, heading)` is true if the point lies on a
+    /// drivable lane whose travel direction agrees with `heading` (radians), or inside a
+    /// junction. Enables the local planner that passes static obstacles (never through
+    /// oncoming lanes); without it the expert stops before them. See [`network_drivable`].
+    pub drivable: Option<&'a dyn Fn(Vec2, f64) -> bool>,
+}
+
+impl std::fmt::Debug for ExpertInput<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ExpertInput")
+            .field("ego", self.ego)
+            .field("route_len_m", &self.route.length())
+            .field("actors", &self.actors.len())
+            .field("lights", &self.lights.len())
+            .field("speed_limit_mps", &self.speed_limit_mps)
+            .field("drivable", &self.drivable.is_some())
+            .finish()
+    }
+}
+
+/// What limited the target speed at this decision (for logs and tests).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SpeedReason {
+    Cruise,
+    SpeedLimit,
+    Curve,
+    /// An actor in (or predicted in) the route corridor ahead; stop before it.
+    Obstacle {
+        actor_id: u32,
+    },
+    /// Following a vehicle moving along the route.
+    Lead {
+        actor_id: u32,
+    },
+    /// A red or yellow light whose stop line is on the route ahead.
+    Light,
+    /// No usable route or ego state: stand still.
+    NoRoute,
+}
+
+/// The expert's decision, in the protocol's action space.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExpertAction {
+    /// In [-1, 1], negative = left; already within ±`steer_rate_per_decision` of the previous one,
+    /// so the bridge applies it unchanged.
+    pub steer: f64,
+    /// In [0, 30] m/s.
+    pub target_speed_mps: f64,
+    pub reason: SpeedReason,
+    /// Lateral offset of the pursued path from the route at the ego (m, > 0 = left), non-zero
+    /// while passing an obstacle.
+    pub path_offset_m: f64,
+}
+
+/// A committed lateral detour around a static obstacle: offset `o` reached over
+/// `[s0, s1]`, held to `s2`, returned to zero at `s3` (route arc lengths).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Detour {
+    offset: f64,
+    s0: f64,
+    s1: f64,
+    s2: f64,
+    s3: f64,
+}
+
+impl Detour {
+    fn offset_at(&self, s: f64) -> f64 {
+        let blend = |t: f64| 0.5 - 0.5 * (std::f64::consts::PI * t.clamp(0.0, 1.0)).cos();
+        if s <= self.s0 || s >= self.s3 {
+            0.0
+        } else if s < self.s1 {
+            self.offset * blend((s - self.s0) / (self.s1 - self.s0).max(1e-6))
+        } else if s <= self.s2 {
+            self.offset
+        } else {
+            self.offset * (1.0 - blend((s - self.s2) / (self.s3 - self.s2).max(1e-6)))
+        }
+    }
+}
+
+/// A speed constraint: the front bumper must be at speed ≤ `v_at` when reaching arc `s_stop`.
+#[derive(Debug, Clone, Copy)]
+struct StopPoint {
+    s_stop: f64,
+    v_at: f64,
+    reason: SpeedReason,
+    /// How far the front may creep when stalled (lights and standing actors, not moving
+    /// traffic): arc of the closest allowed front position.
+    creep_limit: Option<f64>,
+}
+
+/// The expert. Keeps the last steer (the bridge's rate-limit reference), the route progress hint,
+/// time spent at rest and a committed detour.
+#[derive(Debug, Clone)]
+pub struct Expert {
+    params: ExpertParams,
+    last_steer: f64,
+    s_hint: Option<f64>,
+    rest_time_s: f64,
+    detour: Option<Detour>,
+    /// Allowed speed per metre ahead of `envelope_s0` (curves only), from the last decision.
+    envelope: Vec<f64>,
+    envelope_s0: f64,
+}
+
+/// Route point at arc `s`, extrapolated along the end headings beyond the ends.
+fn route_point(route: &Polyline, s: f64) -> Vec2 {
+    let len = route.length();
+    if s > len {
+        route.point_at(len) + Vec2::from_angle(route.heading_at(len)) * (s - len)
+    } else if s < 0.0 {
+        route.point_at(0.0) + Vec2::from_angle(route.heading_at(0.0)) * s
+    } else {
+        route.point_at(s)
+    }
+}
+
+/// Straight extensions added before the start and after the end of the route, m.
+const ROUTE_EXTENSION_BEFORE_M: f64 = 20.0;
+const ROUTE_EXTENSION_AFTER_M: f64 = 80.0;
+
+fn extend_route(route: &Polyline) -> Polyline {
+    let pts = route.points();
+    let len = route.length();
+    let mut out = Vec::with_capacity(pts.len() + 2);
+    out.push(pts[0] - Vec2::from_angle(route.heading_at(0.0)) * ROUTE_EXTENSION_BEFORE_M);
+    out.extend_from_slice(pts);
+    out.push(pts[pts.len() - 1] + Vec2::from_angle(route.heading_at(len)) * ROUTE_EXTENSION_AFTER_M);
+    Polyline::new(out)
+}
+
+/// Route direction at `s`, averaged over ±1 m so vertices do not make it jump.
+fn route_heading(route: &Polyline, s: f64) -> f64 {
+    (route_point(route, s + 1.0) - route_point(route, s - 1.0)).angle()
+}
+
+/// Projection of `p` onto the segments of `route` overlapping arcs [s_lo, s_hi].
+fn project_window(route: &Polyline, p: Vec2, s_lo: f64, s_hi: f64) -> Option<Projection> {
+    let pts = route.points();
+    let cum = route.cumulative();
+    if pts.len() < 2 {
+        return route.project(p);
+    }
+    let first = cum.partition_point(|&c| c < s_lo).saturating_sub(1);
+    let mut best: Option<(f64, usize, f64)> = None;
+    for i in first..pts.len() - 1 {
+        if cum[i] > s_hi {
+            break;
+        }
+        let (t, d2) = dh_env::geom::closest_on_segment(p, pts[i], pts[i + 1]);
+        if best.map_or(true, |b| d2 < b.0) {
+            best = Some((d2, i, t));
+        }
+    }
+    let (d2, i, t) = best?;
+    let (a, b) = (pts[i], pts[i + 1]);
+    let distance = d2.sqrt();
+    let side = (b - a).cross(p - a);
+    Some(Projection {
+        s: cum[i] + t * (cum[i + 1] - cum[i]),
+        distance,
+        lateral: if side >= 0.0 { distance } else { -distance },
+        segment: i,
+        point: a.lerp(b, t),
+    })
+}
+
+impl Expert {
+    /// Builds an expert; the parameters are checked by [`ExpertParams::validate`].
+    pub fn new(params: ExpertParams) -> dh_env::Result<Self> {
+        params.validate()?;
+        Ok(Self {
+            params,
+            last_steer: 0.0,
+            s_hint: None,
+            rest_time_s: 0.0,
+            detour: None,
+            envelope: Vec::new(),
+            envelope_s0: 0.0,
+        })
+    }
+
+    pub fn params(&self) -> &ExpertParams {
+        &self.params
+    }
+
+    /// Forgets the episode: the bridge's steer reference restarts at 0 as the protocol says.
+    pub fn reset(&mut self) {
+        self.last_steer = 0.0;
+        self.s_hint = None;
+        self.rest_time_s = 0.0;
+        self.detour = None;
+        self.envelope.clear();
+    }
+
+    /// One decision. Never panics; degenerate input (empty route, non-finite ego state) yields
+    /// a stop with the steer held.
+    pub fn act(&mut self, input: &ExpertInput<'_>) -> ExpertAction {
+        let ego = input.ego;
+        let ok = ego.pose.pos.is_finite() && ego.pose.yaw.is_finite() && ego.speed_mps.is_finite();
+        let finite_route = input.route.points().iter().all(|p| p.is_finite());
+        if input.route.len() < 2 || input.route.length() <= 0.0 || !ok || !finite_route {
+            return ExpertAction {
+                steer: self.last_steer,
+                target_speed_mps: 0.0,
+                reason: SpeedReason::NoRoute,
+                path_offset_m: 0.0,
+            };
+        }
+        // The episode ends 8 m before the route end, but lookaheads and rollouts reach past it:
+        // extend the route straight on at both ends so projections there stay meaningful
+        // (arc lengths below are on the extended route).
+        let ext = extend_route(input.route);
+        let input = &ExpertInput { route: &ext, ..*input };
+        let route = input.route;
+        let v = ego.speed_mps.max(0.0);
+        let s_ego = self.progress(route, ego.pose.pos, v);
+        self.s_hint = Some(s_ego);
+        if v < 0.3 {
+            self.rest_time_s += self.params.decision_period_s;
+        } else {
+            self.rest_time_s = 0.0;
+        }
+        if self.detour.is_some_and(|d| s_ego - ego.length_m > d.s3) {
+            self.detour = None;
+        }
+
+        let (target, reason) = self.target_speed(input, s_ego, v);
+        let steer = self.steer(input, s_ego, v.max(target.min(v + 1.0)).max(1.0));
+        self.last_steer = steer;
+        ExpertAction {
+            steer,
+            target_speed_mps: target.clamp(0.0, 30.0),
+            reason,
+            path_offset_m: self.detour.map_or(0.0, |d| d.offset_at(s_ego)),
+        }
+    }
+
+    /// Arc length of the ego on the route: a windowed projection around the last progress (so
+    /// self-overlapping routes do not make it jump), global on the first call.
+    fn progress(&self, route: &Polyline, p: Vec2, v: f64) -> f64 {
+        let global = || route.project(p).map_or(0.0, |pr| pr.s);
+        match self.s_hint {
+            None => global(),
+            Some(h) => match project_window(route, p, h - 5.0, h + 10.0 + 2.0 * v) {
+                Some(pr) if pr.distance < 8.0 => pr.s,
+                _ => global(),
+            },
+        }
+    }
+
+    /// Lateral offset of the pursued path at arc `s`.
+    fn offset_at(&self, s: f64) -> f64 {
+        self.detour.map_or(0.0, |d| d.offset_at(s))
+    }
+
+    /// A point of the pursued path (the route shifted by the detour offset).
+    fn path_point(&self, route: &Polyline, s: f64) -> Vec2 {
+        let o = self.offset_at(s);
+        let p = route_point(route, s);
+        if o == 0.0 {
+            p
+        } else {
+            p + Vec2::from_angle(route_heading(route, s)).perp() * o
+        }
+    }
+
+    fn lookahead(&self, v: f64) -> f64 {
+        let p = &self.params;
+        (p.lookahead_base_m + p.lookahead_gain_s * v).clamp(p.lookahead_min_m, p.lookahead_max_m)
+    }
+
+    fn steer_to_wheel(&self, steer: f64) -> f64 {
+        -steer.clamp(-1.0, 1.0) * self.params.max_wheel_angle_rad
+    }
+
+    /// Steer command (unclipped to the rate window) that pure pursuit asks for from `pose`.
+    fn pursuit(&self, route: &Polyline, pose: Pose, s_rear: f64, v: f64) -> f64 {
+        let p = &self.params;
+        let rear = pose.pos - pose.forward() * p.rear_to_center_m;
+        let ld = self.lookahead(v);
+        // Lookahead point at arc distance Ld from the rear axle's projection; the chord is used.
+        let target = self.path_point(route, s_rear + ld);
+        let d = target - rear;
+        let chord = d.norm().max(1e-3);
+        let alpha = wrap_angle(d.angle() - pose.yaw);
+        let kappa = 2.0 * alpha.sin() / chord;
+        let delta = (p.wheelbase_m * kappa).atan();
+        (-delta / p.max_wheel_angle_rad).clamp(-1.0, 1.0)
+    }
+
+    /// Integrates the ego's kinematic bicycle (centre reference) for `t` seconds at constant
+    /// speed and steer.
+    fn predict_pose(&self, pose: Pose, v: f64, steer: f64, t: f64) -> Pose {
+        let p = &self.params;
+        let delta = self.steer_to_wheel(steer);
+        let beta = (p.rear_to_center_m / p.wheelbase_m * delta.tan()).atan();
+        let n = ((t / 0.05).ceil() as usize).clamp(1, 100);
+        let dt = t / n as f64;
+        let mut out = pose;
+        for _ in 0..n {
+            let dir = Vec2::from_angle(out.yaw + beta);
+            out.pos += dir * (v * dt);
+            if p.rear_to_center_m > 0.0 {
+                out.yaw += v / p.rear_to_center_m * beta.sin() * dt;
+            } else {
+                out.yaw += v / p.wheelbase_m * delta.tan() * dt;
+            }
+        }
+        out.yaw = wrap_angle(out.yaw);
+        out
+    }
+
+    /// The base lateral law: pure pursuit from the pose predicted `steer_preview_s` ahead, kept
+    /// inside the pre-steer reachability window and the bridge's rate limit around `last`.
+    /// `v` is the ego speed, `v_plan` the speed the lookahead is sized for.
+    fn base_steer(&self, route: &Polyline, pose: Pose, v: f64, v_plan: f64, s_hint: f64, last: f64) -> f64 {
+        let p = &self.params;
+        let rate = p.steer_rate_per_decision;
+        let pose = self.predict_pose(pose, v, last, p.steer_preview_s);
+        let rear = pose.pos - pose.forward() * p.rear_to_center_m;
+        let s_rear = project_window(route, rear, s_hint - 10.0, s_hint + 10.0).map_or(s_hint, |pr| pr.s);
+        let mut u = self.pursuit(route, pose, s_rear, v_plan);
+        // Pre-steer: how the steer an on-path car needs changes over the next decisions, added to
+        // the current pursuit command, must stay reachable from this one under the rate limit.
+        let on_path = |s: f64| {
+            let yaw = (self.path_point(route, s + 1.0) - self.path_point(route, s - 1.0)).angle();
+            let pos = self.path_point(route, s) + Vec2::from_angle(yaw) * p.rear_to_center_m;
+            self.pursuit(route, Pose::new(pos, yaw), s, v_plan)
+        };
+        let u0 = on_path(s_rear);
+        let (mut lo, mut hi) = (-1.0f64, 1.0f64);
+        for k in 1..=p.presteer_decisions {
+            let s_k = s_rear + v_plan * p.decision_period_s * k as f64;
+            let u_k = (u + on_path(s_k) - u0).clamp(-1.0, 1.0);
+            let reach = rate * k as f64;
+            lo = lo.max(u_k - reach);
+            hi = hi.min(u_k + reach);
+        }
+        u = if lo <= hi { u.clamp(lo, hi) } else { 0.5 * (lo + hi) };
+        let u = u.clamp(last - rate, last + rate).clamp(-1.0, 1.0);
+        if u.is_finite() {
+            u
+        } else {
+            last
+        }
+    }
+
+    /// Tracking cost of holding `first` for one decision, then following the base law, over
+    /// `rollout_decisions` decisions at the current speed: squared lateral and (scaled) heading
+    /// errors against the pursued path, sampled every 2 ticks.
+    fn rollout_cost(&self, route: &Polyline, ego: Pose, v: f64, v_plan: f64, s_ego: f64, first: f64) -> f64 {
+        let p = &self.params;
+        const SUB: usize = 2;
+        let dt = p.decision_period_s / SUB as f64;
+        let (mut pose, mut s_hint, mut u) = (ego, s_ego, first);
+        let mut cost = 0.0;
+        let half_len = p.wheelbase_m * 0.5 + 0.85;
+        let mut v = v;
+        for k in 0..p.rollout_decisions {
+            if k > 0 {
+                u = self.base_steer(route, pose, v, v_plan.min(v.max(1.0)), s_hint, u);
+            }
+            for _ in 0..SUB {
+                // The car slows for bends ahead as the speed planner will make it.
+                let i = (s_hint + half_len - self.envelope_s0).max(0.0) as usize;
+                if let Some(cap) = self.envelope.get(i).or(self.envelope.last()) {
+                    v = v.min(cap.max(1.0));
+                }
+                pose = self.predict_pose(pose, v, u, dt);
+                let Some(pr) = project_window(route, pose.pos, s_hint - 5.0, s_hint + 5.0 + 2.0 * v * dt)
+                else {
+                    return f64::INFINITY;
+                };
+                s_hint = pr.s;
+                let lat = pr.lateral - self.offset_at(pr.s);
+                let dh = wrap_angle(pose.yaw - route_heading(route, pr.s));
+                // Beyond 0.5 m the error grows steeply: swinging wide into the next lane to
+                // ease a bend is worse than cutting it a little.
+                let excess = (lat.abs() - 0.5).max(0.0);
+                cost += lat * lat + 20.0 * excess * excess + (p.rollout_heading_weight_m * dh.sin()).powi(2);
+            }
+        }
+        cost
+    }
+
+    fn steer(&self, input: &ExpertInput<'_>, s_ego: f64, v_plan: f64) -> f64 {
+        let p = &self.params;
+        let route = input.route;
+        let v = input.ego.speed_mps.max(0.0);
+        let last = self.last_steer;
+        let base = self.base_steer(route, input.ego.pose, v, v_plan, s_ego, last);
+        if p.rollout_decisions == 0 || v < 0.5 {
+            return base;
+        }
+        // Rollout improvement of the base law: try the reachable steers around the last one and
+        // keep the one whose continuation tracks the path best; ties favour the base command.
+        let rate = p.steer_rate_per_decision;
+        let mut best = (self.rollout_cost(route, input.ego.pose, v, v_plan, s_ego, base) * 0.98, base);
+        for i in -3i32..=3 {
+            let u = (last + rate * i as f64 / 3.0).clamp(-1.0, 1.0);
+            let c = self.rollout_cost(route, input.ego.pose, v, v_plan, s_ego, u);
+            if c < best.0 {
+                best = (c, u);
+            }
+        }
+        best.1
+    }
+
+    /// Path curvature magnitude at arc `s` (heading change over ±w).
+    fn curvature(&self, route: &Polyline, s: f64) -> f64 {
+        const W: f64 = 2.5;
+        let h0 = (self.path_point(route, s) - self.path_point(route, s - W)).angle();
+        let h1 = (self.path_point(route, s + W) - self.path_point(route, s)).angle();
+        wrap_angle(h1 - h0).abs() / W
+    }
+
+    /// Highest speed at which the steer needed around arc `s` is reachable in time and the
+    /// lateral acceleration stays bounded.
+    /// Also stores the braking envelope (allowed speed per metre ahead of the front) for the
+    /// steering rollout.
+    fn curve_speed_profile(&mut self, route: &Polyline, s_front: f64, v: f64) -> (f64, bool) {
+        let p = self.params.clone();
+        let horizon = (v * v / (2.0 * p.comfort_decel_mps2) + 25.0).clamp(30.0, 150.0);
+        let ds = 1.0;
+        let n = (horizon / ds) as usize;
+        let kappa_max = p.max_wheel_angle_rad.tan() / p.wheelbase_m;
+        let steer_of = |k: f64| ((p.wheelbase_m * k).atan() / p.max_wheel_angle_rad).min(1.0);
+        let mut best = f64::INFINITY;
+        let ks: Vec<f64> =
+            (0..=n).map(|i| self.curvature(route, s_front + i as f64 * ds).min(kappa_max)).collect();
+        let rate = p.steer_rate_usage * p.steer_rate_per_decision / p.decision_period_s;
+        let mut envelope = Vec::with_capacity(ks.len());
+        const SPAN: usize = 4;
+        for (i, &k) in ks.iter().enumerate() {
+            let d = i as f64 * ds;
+            let mut v_here = (p.max_lat_accel_mps2 / k.max(1e-6)).sqrt();
+            // Steer-rate bound: the steer change over the last SPAN metres must be doable in the
+            // time it takes to drive them.
+            if i >= SPAN {
+                let du = (steer_of(k) - steer_of(ks[i - SPAN])).abs();
+                if du > 1e-3 {
+                    v_here = v_here.min(rate * SPAN as f64 * ds / du);
+                }
+            }
+            let room = (d - v * p.decision_period_s).max(0.0);
+            best = best.min((v_here * v_here + 2.0 * p.comfort_decel_mps2 * room).sqrt());
+            envelope.push(v_here);
+        }
+        for i in (0..envelope.len().saturating_sub(1)).rev() {
+            envelope[i] = envelope[i].min((envelope[i + 1].powi(2) + 2.0 * p.comfort_decel_mps2 * ds).sqrt());
+        }
+        self.envelope = envelope;
+        self.envelope_s0 = s_front;
+        (best, best.is_finite())
+    }
+
+    fn target_speed(&mut self, input: &ExpertInput<'_>, s_ego: f64, v: f64) -> (f64, SpeedReason) {
+        let p = self.params.clone();
+        let route = input.route;
+        let ego = input.ego;
+        let s_front = s_ego + ego.length_m * 0.5;
+        let mut target = p.cruise_speed_mps;
+        let mut reason = SpeedReason::Cruise;
+        if let Some(lim) = input.speed_limit_mps.filter(|l| l.is_finite() && *l > 0.0) {
+            if lim < target {
+                target = lim;
+                reason = SpeedReason::SpeedLimit;
+            }
+        }
+        let (mut v_curve, finite) = self.curve_speed_profile(route, s_front, v);
+        // While the wheel is still turned (e.g. recovering after a sharp bend) the car drives on
+        // that curvature: do not accelerate past the lateral limit for it.
+        let delta = self.steer_to_wheel(self.last_steer).abs();
+        let kappa_now =
+            (p.rear_to_center_m / p.wheelbase_m * delta.tan()).atan().sin() / p.rear_to_center_m.max(0.1);
+        v_curve =
+            v_curve.min((p.max_lat_accel_mps2 / kappa_now.max(1e-6)).sqrt().max(v.min(p.cruise_speed_mps)));
+        if finite && v_curve < target {
+            target = v_curve;
+            reason = SpeedReason::Curve;
+        }
+
+        let mut stops = self.actor_constraints(input, s_ego, v);
+        stops.extend(self.light_constraints(input, s_front, v));
+        let hold = v * p.decision_period_s;
+        let mut binding: Option<StopPoint> = None;
+        for st in &stops {
+            let d = st.s_stop - s_front - hold;
+            let mut allowed = (st.v_at * st.v_at + 2.0 * p.comfort_decel_mps2 * d.max(0.0)).sqrt();
+            if st.v_at < 0.5 && allowed < 0.6 {
+                allowed = 0.0;
+            }
+            if allowed < target {
+                target = allowed;
+                reason = st.reason;
+                binding = Some(*st);
+            }
+        }
+        // Stall guard against the protocol's blocked timeout while waiting at rest.
+        if target < p.creep_speed_mps && self.rest_time_s >= p.stall_guard_s {
+            if let Some(limit) = binding.and_then(|b| b.creep_limit) {
+                // One creep decision moves the ego by a few centimetres: enough to reset the
+                // protocol's at-rest counter.
+                if limit - s_front > 0.3 {
+                    target = p.creep_speed_mps;
+                }
+            }
+        }
+        (target.max(0.0), reason)
+    }
+
+    /// Stop constraints from red / yellow lights whose stop line lies on the route ahead.
+    fn light_constraints(&self, input: &ExpertInput<'_>, s_front: f64, v: f64) -> Vec<StopPoint> {
+        let p = &self.params;
+        let route = input.route;
+        let mut out = Vec::new();
+        let horizon = v * v / (2.0 * p.comfort_decel_mps2) + 60.0;
+        for light in input.lights {
+            if !matches!(light.color, LightColor::Red | LightColor::Yellow) {
+                continue;
+            }
+            let pos = light.stop_line.pos;
+            if !pos.is_finite() {
+                continue;
+            }
+            let Some(pr) = project_window(route, pos, s_front - 3.0, s_front + horizon) else { continue };
+            let tol = (0.6 * light.lane_width_m).clamp(1.0, 2.0);
+            if pr.distance > tol {
+                continue;
+            }
+            if wrap_angle(route_heading(route, pr.s) - light.stop_line.yaw).abs() > 0.7 {
+                continue;
+            }
+            let d_line = pr.s - s_front;
+            if d_line < -0.5 {
+                continue; // already over the line: clear the junction
+            }
+            if light.color == LightColor::Yellow {
+                let need = v * v / (2.0 * (d_line - p.light_stop_margin_m).max(0.1));
+                if need > p.yellow_max_decel_mps2 {
+                    continue;
+                }
+            }
+            out.push(StopPoint {
+                s_stop: pr.s - p.light_stop_margin_m,
+                v_at: 0.0,
+                reason: SpeedReason::Light,
+                creep_limit: Some(pr.s - p.creep_min_gap_m.min(p.light_stop_margin_m)),
+            });
+        }
+        out
+    }
+
+    /// Corridor test of one footprint against the pursued path: the nearest arc it occupies.
+    fn corridor_hit(
+        &self,
+        route: &Polyline,
+        corners: &[Vec2; 4],
+        s_lo: f64,
+        s_hi: f64,
+        half: f64,
+    ) -> Option<f64> {
+        let mut s_min = f64::INFINITY;
+        let (mut left, mut right, mut inside) = (false, false, false);
+        for c in corners {
+            let pr = project_window(route, *c, s_lo, s_hi)?;
+            // Only points that project inside the window (not onto its clamped ends) count.
+            if pr.s <= s_lo + 1e-6 || pr.s >= s_hi - 1e-6 {
+                continue;
+            }
+            let lat = pr.lateral - self.offset_at(pr.s);
+            s_min = s_min.min(pr.s);
+            if lat.abs() < half {
+                inside = true;
+            }
+            if lat > 0.0 && lat < 8.0 {
+                left = true;
+            } else if lat <= 0.0 && lat > -8.0 {
+                right = true;
+            }
+        }
+        ((inside || (left && right)) && s_min.is_finite()).then_some(s_min)
+    }
+
+    /// Stop / follow constraints from actors in (or predicted in) the corridor ahead; plans a
+    /// detour around a blocking static obstacle when a drivable oracle is given.
+    fn actor_constraints(&mut self, input: &ExpertInput<'_>, s_ego: f64, v: f64) -> Vec<StopPoint> {
+        let p = self.params.clone();
+        let route = input.route;
+        let ego = input.ego;
+        let s_front = s_ego + ego.length_m * 0.5;
+        let s_rear = s_ego - ego.length_m * 0.5;
+        let horizon = v * v / (2.0 * p.comfort_decel_mps2) + v * p.time_headway_s + 40.0;
+        let s_lo = s_rear - 0.5;
+        let s_hi = s_front + horizon;
+        let half_ego = ego.width_m * 0.5 + p.corridor_margin_m;
+        let steps = (p.prediction_horizon_s / p.prediction_step_s).floor() as usize;
+        let mut out = Vec::new();
+        let mut blocking_static: Vec<(f64, &ActorView)> = Vec::new();
+        for a in input.actors {
+            if !(a.pose.pos.is_finite() && a.pose.yaw.is_finite() && a.speed_mps.is_finite()) {
+                continue;
+            }
+            let reach = horizon + a.speed_mps.abs() * p.prediction_horizon_s + a.length_m + 10.0;
+            if a.pose.pos.dist(ego.pose.pos) > reach {
+                continue;
+            }
+            let moving = a.speed_mps.abs() > 0.2;
+            let fwd = Vec2::from_angle(a.pose.yaw);
+            let last = if moving { steps } else { 0 };
+            for k in 0..=last {
+                let t = k as f64 * p.prediction_step_s;
+                let mut fp = a.footprint();
+                fp.pose.pos += fwd * (a.speed_mps * t);
+                let Some(s_hit) = self.corridor_hit(route, &fp.corners(), s_lo, s_hi, half_ego) else {
+                    continue;
+                };
+                if s_hit + a.length_m.max(a.width_m) < s_front {
+                    continue; // beside or behind the ego: not ours to stop for
+                }
+                let d = (s_hit - s_front).max(0.0);
+                if k > 0 {
+                    let v_max = p.cruise_speed_mps.max(v);
+                    let t_acc = ((v_max - v) / p.arrival_accel_mps2).max(0.0);
+                    let d_acc = v * t_acc + 0.5 * p.arrival_accel_mps2 * t_acc * t_acc;
+                    let t_arr = if d <= d_acc {
+                        (-v + (v * v + 2.0 * p.arrival_accel_mps2 * d).sqrt()) / p.arrival_accel_mps2
+                    } else {
+                        t_acc + (d - d_acc) / v_max.max(0.1)
+                    };
+                    if t + p.conflict_slack_s < t_arr {
+                        continue;
+                    }
+                    // Braking for an actor that would only get there after the ego has cleared
+                    // the spot would leave the ego standing in its way: keep going.
+                    if v > 2.0 {
+                        let extent = a.length_m.max(a.width_m) + 2.0 * p.corridor_margin_m;
+                        let t_clear = (d + extent + ego.length_m) / v;
+                        if t >= t_clear + p.pass_margin_s {
+                            break;
+                        }
+                    }
+                }
+                let along = wrap_angle(a.pose.yaw - route_heading(route, s_hit.max(s_front)));
+                let is_vehicle = !a.kind.is_static() && a.kind != ActorKind::Pedestrian;
+                let v_along = a.speed_mps * along.cos();
+                if is_vehicle && along.abs() < 0.8 && v_along > 0.5 {
+                    // Lead vehicle: gap from its current rear to our front.
+                    let s_now = project_window(route, a.pose.pos, s_lo, s_hi).map_or(s_hit, |pr| pr.s);
+                    let gap = s_now - a.length_m * 0.5 - s_front;
+                    let free = gap - p.stop_gap_m;
+                    let v_follow = if free <= 0.0 {
+                        0.0
+                    } else {
+                        let by_brake = (v_along * v_along + 2.0 * p.comfort_decel_mps2 * free).sqrt();
+                        let by_headway =
+                            if p.time_headway_s > 0.0 { free / p.time_headway_s } else { f64::INFINITY };
+                        by_brake.min(by_headway.max(v_along.min(free)))
+                    };
+                    // Expressed as a stop point reached at speed v_follow right now.
+                    out.push(StopPoint {
+                        s_stop: s_front + v * p.decision_period_s,
+                        v_at: v_follow,
+                        reason: SpeedReason::Lead { actor_id: a.id },
+                        creep_limit: None,
+                    });
+                } else {
+                    if k == 0 && !moving {
+                        blocking_static.push((s_hit, a));
+                    }
+                    out.push(StopPoint {
+                        s_stop: s_hit - p.stop_gap_m,
+                        v_at: 0.0,
+                        reason: SpeedReason::Obstacle { actor_id: a.id },
+                        creep_limit: (k == 0 && !moving).then(|| {
+                            // Keep twice the gap from a person who may step towards the car.
+                            let keep = if a.kind == ActorKind::Pedestrian { 2.0 } else { 1.0 };
+                            s_hit - (keep * p.creep_min_gap_m).min(p.stop_gap_m)
+                        }),
+                    });
+                }
+                break;
+            }
+        }
+        if let Some(drivable) = input.drivable {
+            if self.detour.is_none() {
+                if let Some(&(s_hit, _)) = blocking_static
+                    .iter()
+                    // Only true obstacles: a stopped vehicle may be queuing and is waited for.
+                    .filter(|(_, a)| a.kind.is_static())
+                    .min_by(|x, y| x.0.total_cmp(&y.0))
+                {
+                    if s_hit - s_front < 40.0 + v * 3.0 {
+                        self.detour = self.plan_detour(input, drivable, s_ego, v, s_hit);
+                    }
+                }
+            }
+            if self.detour.is_some() {
+                return self.recheck_with_detour(input, s_ego, out);
+            }
+        }
+        out
+    }
+
+    /// With a detour in force, obstacles off the shifted corridor no longer constrain speed.
+    fn recheck_with_detour(
+        &self,
+        input: &ExpertInput<'_>,
+        s_ego: f64,
+        stops: Vec<StopPoint>,
+    ) -> Vec<StopPoint> {
+        let p = &self.params;
+        let route = input.route;
+        let ego = input.ego;
+        let s_front = s_ego + ego.length_m * 0.5;
+        let half_ego = ego.width_m * 0.5 + p.corridor_margin_m;
+        stops
+            .into_iter()
+            .filter(|st| match st.reason {
+                SpeedReason::Obstacle { actor_id } => {
+                    let Some(a) = input.actors.iter().find(|a| a.id == actor_id) else { return true };
+                    if a.speed_mps.abs() > 0.2 {
+                        return true;
+                    }
+                    self.corridor_hit(
+                        route,
+                        &a.footprint().corners(),
+                        s_front - ego.length_m - 1.0,
+                        s_front + 200.0,
+                        half_ego,
+                    )
+                    .is_some()
+                }
+                _ => true,
+            })
+            .collect()
+    }
+
+    /// Finds the smallest lateral offset whose shifted path keeps the ego footprint on drivable
+    /// ground and clear of every actor along the pass.
+    fn plan_detour(
+        &self,
+        input: &ExpertInput<'_>,
+        drivable: &dyn Fn(Vec2, f64) -> bool,
+        s_ego: f64,
+        v: f64,
+        s_hit: f64,
+    ) -> Option<Detour> {
+        let p = &self.params;
+        let route = input.route;
+        let ego = input.ego;
+        let half_ego = ego.width_m * 0.5 + p.corridor_margin_m;
+        // Extent of the blocking cluster along the route (obstacles close together pass as one).
+        let mut s_end = s_hit;
+        let mut s_start = s_hit;
+        for a in input.actors.iter().filter(|a| a.speed_mps.abs() < 0.05) {
+            if let Some(sh) =
+                self.corridor_hit(route, &a.footprint().corners(), s_ego - 5.0, s_hit + 60.0, half_ego + 4.0)
+            {
+                if sh <= s_end + 10.0 && sh >= s_hit - 1.0 {
+                    let far = a
+                        .footprint()
+                        .corners()
+                        .iter()
+                        .filter_map(|c| project_window(route, *c, sh - 5.0, sh + 30.0))
+                        .map(|pr| pr.s)
+                        .fold(sh, f64::max);
+                    s_end = s_end.max(far);
+                    s_start = s_start.min(sh);
+                }
+            }
+        }
+        let ramp = (p.avoid_ramp_per_mps * v.max(4.0)).max(p.avoid_ramp_min_m);
+        let s1 = s_start - p.stop_gap_m.max(2.0) - ego.length_m * 0.5;
+        let s0 = (s1 - ramp).max(s_ego);
+        if s1 - s0 < 0.5 * p.avoid_ramp_min_m {
+            return None;
+        }
+        let s2 = s_end + ego.length_m * 0.5 + 2.0;
+        let s3 = s2 + ramp;
+        for &mag in &p.avoid_offsets_m {
+            for sign in [1.0, -1.0] {
+                let d = Detour { offset: sign * mag, s0, s1, s2, s3 };
+                if self.detour_clear(input, drivable, &d) {
+                    return Some(d);
+                }
+            }
+        }
+        None
+    }
+
+    fn detour_clear(
+        &self,
+        input: &ExpertInput<'_>,
+        drivable: &dyn Fn(Vec2, f64) -> bool,
+        d: &Detour,
+    ) -> bool {
+        let route = input.route;
+        let margin = self.params.corridor_margin_m;
+        let half_w = input.ego.width_m * 0.5;
+        let half_l = input.ego.length_m * 0.5;
+        let mut s = d.s0;
+        while s <= d.s3 {
+            let o = d.offset_at(s);
+            let base = route_point(route, s);
+            let dir = Vec2::from_angle(route_heading(route, s));
+            let n = dir.perp();
+            let c = base + n * o;
+            // Footprint edges (with a small inset) must stay on drivable lanes.
+            for e in [-(half_w - 0.2), 0.0, half_w - 0.2] {
+                if !drivable(c + n * e, dir.angle()) {
+                    return false;
+                }
+            }
+            for a in input.actors {
+                if a.speed_mps.abs() > 0.2 {
+                    continue;
+                }
+                // Actor corners, edge midpoints and centre against the ego rectangle + margin.
+                let k = a.footprint().corners();
+                let probes = [
+                    k[0],
+                    k[1],
+                    k[2],
+                    k[3],
+                    k[0].lerp(k[1], 0.5),
+                    k[1].lerp(k[2], 0.5),
+                    k[2].lerp(k[3], 0.5),
+                    k[3].lerp(k[0], 0.5),
+                    a.pose.pos,
+                ];
+                for q in probes {
+                    let rel = q - c;
+                    if rel.dot(dir).abs() < half_l + margin && rel.dot(n).abs() < half_w + margin {
+                        return false;
+                    }
+                }
+            }
+            s += 1.0;
+        }
+        true
+    }
+}
+
+/// Lanes whose direction differs from the travel heading by more than this are oncoming.
+const SAME_DIRECTION_MAX_RAD: f64 = 1.0;
+
+/// The drivable-area oracle of a road network for [`ExpertInput::drivable`]: a point is usable
+/// when a passenger lane containing it runs within ~57° of the travel heading, or when it lies
+/// inside a junction outline.
+pub fn network_drivable(net: &Network) -> impl Fn(Vec2, f64) -> bool + '_ {
+    move |p: Vec2, heading: f64| {
+        let idx = net.drivable();
+        let mut lanes: SmallVec<[LaneIdx; 8]> = SmallVec::new();
+        idx.lanes_at(p, &mut lanes);
+        let along = lanes.iter().any(|&l| {
+            let shape = &net.lanes[l].shape;
+            shape.project(p).is_some_and(|pr| {
+                wrap_angle(shape.heading_at(pr.s) - heading).abs() <= SAME_DIRECTION_MAX_RAD
+            })
+        });
+        along || idx.junction_at(p).is_some()
+    }
+}
+
+/// Speed limit of the drivable lane nearest to `p` (within 3 m), m/s.
+pub fn network_speed_limit(net: &Network, p: Vec2) -> Option<f64> {
+    net.drivable().nearest_lane(p, 3.0).map(|(l, _)| net.lanes[l].speed_mps)
+}
+
+impl Expert {
+    /// Takes the steering geometry (wheelbase, rear axle → centre, maximum road-wheel angle)
+    /// from the world's ego vehicle parameters. Values that would fail validation are ignored.
+    pub fn set_vehicle(&mut self, v: &VehicleParams) {
+        let mut p = self.params.clone();
+        p.wheelbase_m = v.wheelbase_m;
+        p.rear_to_center_m = v.rear_axle_to_center_m;
+        p.max_wheel_angle_rad = v.max_steer_deg.to_radians();
+        if p.validate().is_ok() {
+            self.params = p;
+        }
+    }
+
+    /// One decision from a live [`World`]: its ego (and its steering geometry, see
+    /// [`Expert::set_vehicle`]), actors and lights, the lane speed limit and the map's
+    /// drivable-area oracle. `route` is the scenario's ego route.
+    pub fn act_in_world(&mut self, world: &World, route: &Polyline) -> ExpertAction {
+        self.set_vehicle(world.vehicle_params());
+        let net = world.map();
+        let ego = *world.ego();
+        let oracle = network_drivable(net);
+        let input = ExpertInput {
+            ego: &ego,
+            route,
+            actors: world.actors(),
+            lights: world.lights(),
+            speed_limit_mps: network_speed_limit(net, ego.pose.pos),
+            drivable: Some(&oracle),
+        };
+        self.act(&input)
+    }
+}
+
+impl From<ExpertAction> for dh_env::drive::bridge::Decision {
+    fn from(a: ExpertAction) -> Self {
+        Self { steer: a.steer, target_speed_mps: a.target_speed_mps }
+    }
+}
