@@ -47,11 +47,16 @@ def main() -> None:
         f'pub const UNICODE_VERSION: &str = "{unicodedata.unidata_version}";\n\n'
     )
     text += table("ALPHA", "`str.isalpha()`", ranges(str.isalpha))
-    text += table("WORD", "`re` word chars: `str.isalnum()` or `_`", ranges(lambda c: c.isalnum() or c == "_"))
+    text += table(
+        "WORD", "`re` word chars: `str.isalnum()` or `_`", ranges(lambda c: c.isalnum() or c == "_")
+    )
     text += table("DECIMAL", "`str.isdecimal()` (`re`'s `\\d`)", ranges(str.isdecimal))
     text += table("PRINTABLE", "`str.isprintable()` (used by `repr`)", ranges(str.isprintable))
     body = "".join(f"    0x{z:X},\n" for z in zeros)
-    text += f"/// Code points whose decimal value is 0; digit value = cp - nearest zero below.\npub(crate) const DECIMAL_ZEROS: &[u32] = &[\n{body}];\n"
+    text += (
+        "/// Code points whose decimal value is 0; digit value = cp - nearest zero below.\n"
+        f"pub(crate) const DECIMAL_ZEROS: &[u32] = &[\n{body}];\n"
+    )
     OUT.write_text(text, encoding="utf-8")
     print(f"wrote {OUT}")
 

@@ -6,6 +6,7 @@
 
 pub mod error;
 pub mod parse;
+pub mod predictions;
 pub mod pyjson;
 pub mod pyunicode;
 

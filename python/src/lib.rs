@@ -2,11 +2,13 @@
 
 use pyo3::prelude::*;
 
+mod benchmark;
 mod errors;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     errors::register(m)?;
+    benchmark::register(m)?;
     Ok(())
 }

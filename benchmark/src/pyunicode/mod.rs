@@ -5,6 +5,7 @@
 //! not Python-alpha); the original's regexes use Python's definitions, so we use tables
 //! generated from CPython (`scripts/gen_pyunicode_tables.py`).
 
+#[rustfmt::skip]
 mod tables;
 
 pub use tables::UNICODE_VERSION;
