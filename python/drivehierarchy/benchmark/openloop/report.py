@@ -170,6 +170,22 @@ def rank_means(scores: Mapping[str, float]) -> dict[str, float | None]:
     return out
 
 
+def weighted_rank_scores(
+    scores: Mapping[str, float], weights: Mapping[str, float] = FROZEN_WEIGHTS
+) -> dict[str, float | None]:
+    """Σ_t∈r w_t S_t / Σ_t∈r w_t per rank: the rank score behind the paper's rank-level Spearman
+    figure and its R4 correlations (with it the paper's ρ(R1,R2)=0.843, ρ(R1,R4)=0.664, ... are
+    reproduced from Tables 1–2; the plain means of PROTOCOL §1.4 give other values)."""
+    out: dict[str, float | None] = {}
+    for rank in RANKS:
+        tasks = [t for t in TASK_IDS if TASK_RANK[t] == rank]
+        if any(t not in scores for t in tasks):
+            out[rank] = None
+            continue
+        out[rank] = sum(weights[t] * scores[t] for t in tasks) / sum(weights[t] for t in tasks)
+    return out
+
+
 def weighted_score(
     scores: Mapping[str, float], weights: Mapping[str, float] = FROZEN_WEIGHTS
 ) -> float | None:
@@ -219,6 +235,7 @@ def table1_rows(pool: Pool) -> list[dict[str, Any]]:
         for tid in TASK_IDS:
             row[tid] = scores.get(tid)
         row.update(rank_means(scores))
+        row["weighted_ranks"] = weighted_rank_scores(scores)
         rows.append(row)
     return rows
 
@@ -351,7 +368,7 @@ def build_report(pool: Pool, out: Path, r4_csv: Path | None = None, plots: bool 
     task_m = rank_m = None
     if len(full) >= 3:
         task_m = correlation_matrix({t: [r[t] for r in full] for t in TASK_IDS})
-        rank_cols = {rk: [r[rk] for r in full] for rk in RANKS}
+        rank_cols = {rk: [r["weighted_ranks"][rk] for r in full] for rk in RANKS}
         with_r4 = [r for r in full if r["model"] in r4]
         if r4 and len(with_r4) == len(full):
             rank_cols["R4"] = [r4[r["model"]] for r in full]
@@ -365,7 +382,7 @@ def build_report(pool: Pool, out: Path, r4_csv: Path | None = None, plots: bool 
         ys = [r4[r["model"]] for r in paired]
         corr_rows = []
         for key in (*TASK_IDS, *RANKS, "avg"):
-            xs = [r[key] for r in paired]
+            xs = [r["weighted_ranks"][key] if key in RANKS else r[key] for r in paired]
             corr_rows.append(
                 (key if key != "avg" else "Avg.Score", spearman(xs, ys) if len(paired) >= 3 else math.nan)
             )

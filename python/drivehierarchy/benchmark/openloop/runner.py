@@ -65,6 +65,7 @@ class RunConfig:
     decoding: DecodingConfig = field(default_factory=DecodingConfig)
     timeout_s: float = 300.0
     max_retries: int = 6
+    backoff_s: float = 0.5  # first retry delay; doubles per attempt (capped at 30 s)
     progress: bool = True
 
     def __post_init__(self) -> None:
@@ -277,16 +278,16 @@ def predict(config: RunConfig) -> RunSummary:
     manifest_path = out / "manifest.json"
     old_manifest = _check_resume(manifest_path, config)
 
-    catalog = config.load_catalog()
-    specs = select_datasets(catalog, config.datasets)
-    roots = ImageRootMap.parse(config.image_roots)
-    loaded: list[LoadedDataset] = [load_dataset(catalog, s, roots, config.limit) for s in specs]
-
     api_key = None
     if config.api_key_env:
         api_key = os.environ.get(config.api_key_env)
         if not api_key:
             raise ConfigError(f"--api-key-env: environment variable {config.api_key_env!r} is not set")
+
+    catalog = config.load_catalog()
+    specs = select_datasets(catalog, config.datasets)
+    roots = ImageRootMap.parse(config.image_roots)
+    loaded: list[LoadedDataset] = [load_dataset(catalog, s, roots, config.limit) for s in specs]
     client = ChatClient(
         config.base_url,
         config.model,
@@ -294,6 +295,7 @@ def predict(config: RunConfig) -> RunSummary:
         decoding=config.decoding,
         timeout_s=config.timeout_s,
         max_retries=config.max_retries,
+        backoff_s=config.backoff_s,
     )
 
     summary = RunSummary(out=out)
