@@ -302,3 +302,18 @@ def test_config_validation(tmp_path: Path) -> None:
                 progress=False,
             )
         )
+
+
+def test_many_requests_in_flight(tmp_path: Path) -> None:
+    from drivehierarchy.benchmark.openloop.synthetic import make_synthetic_records
+
+    data = make_synthetic_records(tmp_path / "data", 25, tmp_path / "images")
+    cat = default_catalog(data)
+    records = [r for spec in cat.datasets for r in load_dataset(cat, spec).records]
+    write_images(records)
+    policy = OraclePolicy(records)
+    server = ScriptedOpenAIServer(policy, latency_s=0.05)
+    with server as url:
+        s = predict(RunConfig(base_url=url, model="m", out=tmp_path / "run", data_dir=data, progress=False))
+    assert s.complete and s.written == 14 * 25 and policy.unmatched == 0
+    assert server.stats.max_in_flight >= 32
