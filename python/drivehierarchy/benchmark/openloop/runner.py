@@ -119,9 +119,8 @@ def read_done_ids(path: Path, repair: bool = True) -> set[str]:
     data = path.read_bytes()
     done: set[str] = set()
     end_ok = data.rfind(b"\n") + 1  # bytes up to the last complete line
-    if repair and end_ok < len(data):
-        with open(path, "r+b") as fh:
-            fh.truncate(end_ok)
+    if repair:
+        _cut_torn_tail(path, data)
     for line in data[:end_ok].splitlines():
         if not line.strip():
             continue
@@ -136,6 +135,18 @@ def read_done_ids(path: Path, repair: bool = True) -> set[str]:
         ):
             done.add(obj["id"])
     return done
+
+
+def _cut_torn_tail(path: Path, data: bytes | None = None) -> None:
+    """Truncate `path` after its last newline (a line torn by a kill has none)."""
+    if data is None:
+        if not path.exists():
+            return
+        data = path.read_bytes()
+    end_ok = data.rfind(b"\n") + 1
+    if end_ok < len(data):
+        with open(path, "r+b") as fh:
+            fh.truncate(end_ok)
 
 
 def prediction_line(rec: Record, text: str, model: str, latency_s: float, usage: dict[str, Any]) -> str:
@@ -299,7 +310,7 @@ def predict(config: RunConfig) -> RunSummary:
     )
 
     summary = RunSummary(out=out)
-    session = {"started_at": utc_now(), "finished_at": None, "status": "running"}
+    session: dict[str, Any] = {"started_at": utc_now(), "finished_at": None, "status": "running"}
     manifest: dict[str, Any] = {
         "version": MANIFEST_VERSION,
         "drivehierarchy_version": _package_version(),
@@ -324,6 +335,7 @@ def predict(config: RunConfig) -> RunSummary:
     }
     _write_json_atomic(manifest_path, manifest)
 
+    _cut_torn_tail(out / "errors.jsonl")
     errors = _Appender(out / "errors.jsonl")
     writers: dict[str, _Appender] = {}
     pending: list[tuple[Record, _Appender]] = []
