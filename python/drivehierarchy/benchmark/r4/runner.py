@@ -288,7 +288,9 @@ def summarize(results: list[dict[str, Any]]) -> dict[str, Any]:
 def write_summary(out: Path, results: list[dict[str, Any]]) -> dict[str, Any]:
     summary = summarize(results)
     _write_json_atomic(out / "summary.json", summary)
-    rows = ["scenario,category,status,termination_reason,score_route,score_safety,score_efficiency,score_composed"]
+    rows = [
+        "scenario,category,status,termination_reason,score_route,score_safety,score_efficiency,score_composed"
+    ]
     for r in results:
         s = r["score"]
         rows.append(
