@@ -140,6 +140,12 @@ def read_results(out: Path) -> dict[str, dict[str, Any]]:
 
 def _append_line(path: Path, record: dict[str, Any]) -> None:
     data = json.dumps(record, sort_keys=True) + "\n"
+    # A line torn by a kill is closed first (and then skipped as invalid JSON), never extended.
+    if path.exists() and path.stat().st_size > 0:
+        with path.open("rb") as fh:
+            fh.seek(-1, os.SEEK_END)
+            if fh.read(1) != b"\n":
+                data = "\n" + data
     with path.open("a", encoding="utf-8") as fh:
         fh.write(data)
         fh.flush()
