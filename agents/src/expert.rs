@@ -368,7 +368,7 @@ fn project_window(route: &Polyline, p: Vec2, s_lo: f64, s_hi: f64) -> Option<Pro
             break;
         }
         let (t, d2) = dh_env::geom::closest_on_segment(p, pts[i], pts[i + 1]);
-        if best.map_or(true, |b| d2 < b.0) {
+        if best.is_none_or(|b| d2 < b.0) {
             best = Some((d2, i, t));
         }
     }
