@@ -65,6 +65,9 @@ pub struct ExpertParams {
     pub light_stop_margin_m: f64,
     /// Yellow is run through when stopping would need more than this deceleration, m/s².
     pub yellow_max_decel_mps2: f64,
+    /// A red is run through only when stopping before its line would need more than this
+    /// deceleration (the light turned while the ego was committed), m/s².
+    pub red_commit_decel_mps2: f64,
     /// Time headway behind a lead vehicle, s.
     pub time_headway_s: f64,
     /// Actor motion is extrapolated (constant speed and heading) over this horizon, sampled at
@@ -117,6 +120,7 @@ impl Default for ExpertParams {
             stop_gap_m: 3.5,
             light_stop_margin_m: 4.0,
             yellow_max_decel_mps2: 3.5,
+            red_commit_decel_mps2: 6.5,
             time_headway_s: 1.5,
             prediction_horizon_s: 3.0,
             prediction_step_s: 0.5,
@@ -150,6 +154,7 @@ impl ExpertParams {
             ("prediction_step_s", self.prediction_step_s),
             ("arrival_accel_mps2", self.arrival_accel_mps2),
             ("yellow_max_decel_mps2", self.yellow_max_decel_mps2),
+            ("red_commit_decel_mps2", self.red_commit_decel_mps2),
             ("avoid_ramp_min_m", self.avoid_ramp_min_m),
         ];
         for (field, v) in positive {
@@ -431,7 +436,14 @@ impl Expert {
         // extend the route straight on at both ends so projections there stay meaningful
         // (arc lengths below are on the extended route).
         let ext = extend_route(input.route);
-        let input = &ExpertInput { route: &ext, ..*input };
+        // A malformed ego size falls back to a passenger car's so every length below is finite.
+        let mut ego_fixed = *ego;
+        if !(ego.length_m.is_finite() && ego.length_m > 0.0 && ego.width_m.is_finite() && ego.width_m > 0.0) {
+            ego_fixed.length_m = 4.9;
+            ego_fixed.width_m = 2.0;
+        }
+        let ego = &ego_fixed;
+        let input = &ExpertInput { route: &ext, ego, ..*input };
         let route = input.route;
         let v = ego.speed_mps.max(0.0);
         let s_ego = self.progress(route, ego.pose.pos, v);
@@ -450,7 +462,7 @@ impl Expert {
         self.last_steer = steer;
         ExpertAction {
             steer,
-            target_speed_mps: target.clamp(0.0, 30.0),
+            target_speed_mps: if target.is_finite() { target.clamp(0.0, 30.0) } else { 0.0 },
             reason,
             path_offset_m: self.detour.map_or(0.0, |d| d.offset_at(s_ego)),
         }
@@ -759,6 +771,13 @@ impl Expert {
             if light.color == LightColor::Yellow {
                 let need = v * v / (2.0 * (d_line - p.light_stop_margin_m).max(0.1));
                 if need > p.yellow_max_decel_mps2 {
+                    continue;
+                }
+            } else {
+                // A red that appears when even hard braking cannot stop the front before the
+                // line (after yellow was run through): clear the junction rather than stop in it.
+                let reach = (d_line - v * p.decision_period_s).max(0.05);
+                if v * v / (2.0 * reach) > p.red_commit_decel_mps2 {
                     continue;
                 }
             }
