@@ -10,6 +10,7 @@ pub mod map;
 pub mod render;
 pub mod scenario;
 pub mod score;
+pub mod sim;
 pub mod view;
 pub mod world;
 

@@ -205,3 +205,35 @@ fn town01_map_has_the_advertised_features() {
     assert!(tl.phases.len() >= 4);
     assert!(!net.tl_links("C").is_empty());
 }
+
+/// Every official scenario's hero route (its `route_edges`, from its depart lane) must give
+/// lanes and a route polyline on tongji.
+#[test]
+fn tongji_every_official_hero_route() {
+    let Some(net) = load_or_skip(&tongji_path()) else { return };
+    let root = repo_root().join("../shared/official/Close_Loop_Evaluation/Scenario_Onsite");
+    let Ok(cats) = std::fs::read_dir(&root) else { return };
+    let mut checked = 0;
+    for cat in cats.flatten() {
+        let Ok(scens) = std::fs::read_dir(cat.path()) else { continue };
+        for sc in scens.flatten() {
+            let Ok(text) = std::fs::read_to_string(sc.path().join("entity_sumo.json")) else { continue };
+            let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+            let hero = &v["hero"];
+            let edges: Vec<usize> = hero["route_edges"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| {
+                    net.edge_by_id(x.as_str().unwrap()).unwrap_or_else(|| panic!("{x} in {:?}", sc.path()))
+                })
+                .collect();
+            let start = hero["depart"]["lane_id"].as_str().and_then(|id| net.lane_by_id(id));
+            let pl =
+                net.route_polyline(&edges, start).unwrap_or_else(|e| panic!("{}: {e}", sc.path().display()));
+            assert!(pl.length() > 0.0);
+            checked += 1;
+        }
+    }
+    eprintln!("checked {checked} official hero routes");
+}

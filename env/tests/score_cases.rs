@@ -104,6 +104,7 @@ fn progress_step_cap_of_20_m() {
     assert_eq!(s.termination_reason, TerminationReason::Incomplete);
     assert_eq!(s.status, Status::Failed);
     assert_eq!(s.score_route, 50.0);
+    assert_eq!(t.route_score(), 50.0);
 }
 
 #[test]

@@ -2,11 +2,16 @@
 
 use pyo3::prelude::*;
 
+mod benchmark;
+mod env;
 mod errors;
+mod json;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     errors::register(m)?;
+    env::register(m)?;
+    benchmark::register(m)?;
     Ok(())
 }

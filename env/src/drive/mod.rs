@@ -11,3 +11,22 @@ pub use bridge::{ActuationBridge, Control, Decision};
 pub use command::{navigation_command, Command};
 pub use prompt::{condition_prefix, decision_prompt, format_1f, ACTION_QUESTION};
 pub use route::{RouteTracker, RouteView, LOOKAHEAD_M, SAMPLE_DISTANCES_M};
+
+use crate::geom::Pose;
+
+/// Everything the protocol derives from the ego state at one decision.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DecisionContext {
+    pub route: RouteView,
+    pub command: Command,
+    /// Condition prefix + action question, exactly as sent to the VLM.
+    pub prompt: String,
+}
+
+/// Route view → navigation command → prompt text, for the ego at `ego` moving at `speed_mps`.
+pub fn decision_context(tracker: &RouteTracker, ego: &Pose, speed_mps: f64) -> DecisionContext {
+    let route = tracker.future_points(ego);
+    let command = navigation_command(&route.points);
+    let prompt = decision_prompt(speed_mps, command, route.distance_to_go_m, &route.points);
+    DecisionContext { route, command, prompt }
+}

@@ -312,6 +312,7 @@ impl Network {
         self.edges[self.lanes[lane].edge].function
     }
     /// Pose at the end of the lane shape (where vehicles stop), heading of its last segment.
+    /// Lane indices come from this network; an out-of-range index panics like slice indexing.
     pub fn stop_line(&self, lane: LaneIdx) -> Pose {
         let sh = &self.lanes[lane].shape;
         let s = sh.length();

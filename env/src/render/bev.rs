@@ -5,7 +5,7 @@
 
 use super::map::{Mat, RenderMap, N_LAYERS, N_MATS};
 use super::mesh::actor_dims;
-use super::raster::{fill_flat, Target, SV};
+use super::raster::{fill_flat, fill_row, pattern, Target, SV};
 use super::{FrameInput, Image, Renderer};
 use crate::error::{Error, Result};
 use crate::geom::Vec2;
@@ -126,9 +126,7 @@ impl Renderer {
         frame.validate()?;
         out.resize(cfg.size_px, cfg.size_px);
         let n = cfg.size_px as usize;
-        for px in out.data.chunks_exact_mut(3) {
-            px.copy_from_slice(&BACKGROUND);
-        }
+        fill_row(&mut out.data, &pattern(BACKGROUND));
         let ego = frame.ego.pose.pos - map.origin;
         let (sy, cy) = frame.ego.pose.yaw.sin_cos();
         let v = View {

@@ -6,7 +6,7 @@
 
 use super::map::{Mat, RenderMap, N_LAYERS, N_MATS};
 use super::mesh::{self, dot, Frame, Tri3};
-use super::raster::{fill_depth, fill_flat, fill_mask, DepthPlanes, Target, SV};
+use super::raster::{fill_depth, fill_flat, fill_mask, fill_row, pattern, DepthPlanes, Target, SV};
 use super::{FrameInput, Image, Renderer};
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
@@ -119,14 +119,14 @@ impl CameraConfig {
                 return Err(Error::config(f, v, "must be finite"));
             }
         }
-        if !(self.mount_height_m > 0.05) {
+        if self.mount_height_m.is_nan() || self.mount_height_m <= 0.05 {
             return Err(Error::config(
                 "camera.mount_height_m",
                 self.mount_height_m,
                 "must be above the ground (> 0.05)",
             ));
         }
-        if !(self.pitch_deg.abs() < 89.0) {
+        if self.pitch_deg.abs() >= 89.0 {
             return Err(Error::config("camera.pitch_deg", self.pitch_deg, "must be within ±89"));
         }
         if !(self.draw_distance_m > 1.0 && self.draw_distance_m.is_finite()) {
@@ -162,6 +162,7 @@ const SKY_TOP: [f32; 3] = [92.0, 145.0, 215.0];
 const HORIZON: [f32; 3] = [205.0, 215.0, 225.0];
 const GRASS: [f32; 3] = [110.0, 128.0, 88.0];
 const FOG0: f32 = 45.0;
+const MARKING_MAX_M: f32 = 130.0;
 const FOG1: f32 = 260.0;
 
 fn mat_colors() -> [[u8; 3]; N_MATS] {
@@ -436,7 +437,12 @@ impl Renderer {
                 }
                 let mid = [(sg.a[0] + sg.b[0]) * 0.5 - cam.pos[0], (sg.a[1] + sg.b[1]) * 0.5 - cam.pos[1]];
                 let d = (mid[0] * mid[0] + mid[1] * mid[1]).sqrt();
-                let hw = sg.hw.max(d * min_px * 0.5);
+                // Far markings shrink below a pixel and turn into speckle: widen them up to
+                // 60 m, drop them past MARKING_MAX_M.
+                if d > MARKING_MAX_M {
+                    continue;
+                }
+                let hw = sg.hw.max(d.min(60.0) * min_px * 0.5);
                 let (nx, ny) = (-dy / len * hw, dx / len * hw);
                 let q = [
                     cam.to_cam([sg.a[0] - nx, sg.a[1] - ny, 0.0]),
@@ -596,10 +602,7 @@ fn background(cam: &Cam, rgb: &mut [u8]) {
             let dist = cam.pos[2] / -dir[2] * horiz;
             fogged(GRASS.map(|v| v as u8), ((dist - FOG0) / (FOG1 * 1.6 - FOG0)).clamp(0.0, 1.0))
         };
-        let row = &mut rgb[y * w * 3..(y + 1) * w * 3];
-        for px in row.chunks_exact_mut(3) {
-            px.copy_from_slice(&col);
-        }
+        fill_row(&mut rgb[y * w * 3..(y + 1) * w * 3], &pattern(col));
     }
 }
 

@@ -88,7 +88,7 @@ pub struct RenderMap {
 }
 
 const CELL_M: f32 = 32.0;
-const PIECE_M: f64 = 8.0;
+const PIECE_M: f64 = 12.0;
 
 fn is_sidewalk(l: &Lane) -> bool {
     l.allow.contains(VClass::Pedestrian)

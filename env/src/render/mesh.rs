@@ -91,6 +91,7 @@ pub(crate) struct Mesh<'a> {
 }
 
 impl Mesh<'_> {
+    #[allow(clippy::too_many_arguments)]
     fn quad(
         &mut self,
         a: [f32; 3],
@@ -223,7 +224,7 @@ fn scale(c: [u8; 3], k: f32) -> [u8; 3] {
 const GLASS: [u8; 3] = [40, 55, 75];
 const TYRE: [u8; 3] = [22, 22, 24];
 const SKIN: [u8; 3] = [224, 172, 135];
-const TROUSERS: [u8; 3] = [40, 45, 70];
+const TROUSERS: [u8; 3] = [55, 75, 140];
 
 fn wheels(m: &mut Mesh, fr: &Frame, hl: f32, hw: f32, r: f32, axles: &[f32]) {
     for &x in axles {

@@ -14,12 +14,14 @@ mod image;
 mod map;
 mod mesh;
 mod raster;
+mod video;
 
 pub use bev::BevConfig;
 pub use camera::{CameraConfig, ProjectedActor};
 pub use gallery::write_gallery;
 pub use image::Image;
 pub use map::RenderMap;
+pub use video::GifWriter;
 
 use crate::error::{Error, Result};
 use crate::geom::Vec2;

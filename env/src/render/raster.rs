@@ -74,15 +74,32 @@ fn for_spans(a: SV, b: SV, c: SV, width: usize, height: usize, mut span: impl Fn
     }
 }
 
+/// 64 pixels of one colour, for span copies (3-byte pixels do not vectorise one by one).
+#[inline(always)]
+pub(crate) fn pattern(col: [u8; 3]) -> [u8; 192] {
+    let mut p = [0u8; 192];
+    for px in p.chunks_exact_mut(3) {
+        px.copy_from_slice(&col);
+    }
+    p
+}
+
+/// Fills RGB8 bytes with a repeated colour pattern (`row.len()` a multiple of 3).
+#[inline(always)]
+pub(crate) fn fill_row(row: &mut [u8], pat: &[u8; 192]) {
+    for chunk in row.chunks_mut(192) {
+        let n = chunk.len();
+        chunk.copy_from_slice(&pat[..n]);
+    }
+}
+
 /// Fills a triangle with a flat colour, no depth (painter's order).
 pub(crate) fn fill_flat(t: &mut Target, a: SV, b: SV, c: SV, col: [u8; 3]) {
     let w = t.width;
     let rgb = &mut *t.rgb;
+    let pat = pattern(col);
     for_spans(a, b, c, t.width, t.height, |y, x0, x1| {
-        let row = &mut rgb[(y * w + x0) * 3..(y * w + x1) * 3];
-        for px in row.chunks_exact_mut(3) {
-            px.copy_from_slice(&col);
-        }
+        fill_row(&mut rgb[(y * w + x0) * 3..(y * w + x1) * 3], &pat);
     });
 }
 

@@ -140,6 +140,15 @@ impl ScoreTracker {
         self.termination
     }
 
+    /// S_route so far: 100 once terminated by `destination_reached`, else clip(100·best/L).
+    pub fn route_score(&self) -> f64 {
+        if self.termination.is_some_and(|t| t.reason == TerminationReason::DestinationReached) {
+            100.0
+        } else {
+            (100.0 * self.best_m / self.route_length).clamp(0.0, 100.0)
+        }
+    }
+
     /// Accounts one tick (see the module doc for the order) and returns the termination, if
     /// the run ends at this tick or ended before.
     pub fn update(&mut self, tick: &TickInput<'_>) -> Option<Termination> {
@@ -282,7 +291,7 @@ impl ScoreTracker {
         let reached = reason == TerminationReason::DestinationReached;
         let duration = self.time_s();
 
-        let score_route = if reached { 100.0 } else { (100.0 * self.best_m / l).clamp(0.0, 100.0) };
+        let score_route = self.route_score();
         let penalty_product: f64 = self.events.iter().map(|e| e.penalty_multiplier).product();
         let offroad_time = self.offroad_time_s();
         let offroad_ratio = if duration > 0.0 { offroad_time / duration } else { 0.0 };

@@ -1,0 +1,685 @@
+//! One R4 episode: world + route tracker + actuation bridge + score tracker + renderers, stepped
+//! one decision at a time. This is what the Python env wraps (one coarse call per decision).
+//!
+//! Decision timing: the policy is asked at reset (t = 0) and then every
+//! `decision_interval_ticks` ticks; the control computed at a decision is held until the next.
+//! (The original runner applied zero control on ticks 1–4 and first asked at tick 5.)
+
+use crate::drive::{
+    decision_prompt, navigation_command, ActuationBridge, Command, Control, Decision, RouteTracker, RouteView,
+};
+use crate::geom::{wrap_angle, Pose, Vec2};
+use crate::render::{BevConfig, CameraConfig, FrameInput, Image, RenderMap};
+use crate::scenario::{LoadOptions, ResolvedScenario, Scenario};
+use crate::score::{
+    Contact, LogLine, RunFooter, RunHeader, RunInfo, SceneScore, ScoreParams, ScoreTracker, TickInput,
+    TrajectorySample,
+};
+use crate::view::{ActorView, LightColor, TrafficLightView};
+use crate::world::World;
+use crate::{Error, Result, DECISION_INTERVAL_TICKS};
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+use std::path::Path;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// How actions are read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ActionMode {
+    /// `[steer, target_speed_mps]` through the protocol's actuation bridge (what a VLM sends).
+    Decision,
+    /// `[throttle, brake, steer]` applied as is (for RL).
+    Raw,
+}
+
+/// Runtime settings of an episode (the Python `R4Config` minus the scenario).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimConfig {
+    pub action_mode: ActionMode,
+    pub decision_interval_ticks: u32,
+    /// Front camera of the observation; `None` = no image.
+    pub front: Option<CameraConfig>,
+    /// Bird's-eye view of the observation; `None` = no image.
+    pub bev: Option<BevConfig>,
+    /// Build the VLM prompt text for each observation.
+    pub prompt: bool,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        Self {
+            action_mode: ActionMode::Decision,
+            decision_interval_ticks: DECISION_INTERVAL_TICKS,
+            front: Some(CameraConfig::default()),
+            bev: Some(BevConfig::default()),
+            prompt: true,
+        }
+    }
+}
+
+impl SimConfig {
+    pub fn from_json(text: &str) -> Result<SimConfig> {
+        let cfg: SimConfig =
+            serde_json::from_str(text).map_err(|e| Error::config("config", text, e.to_string()))?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        if self.decision_interval_ticks == 0 {
+            return Err(Error::config("decision_interval_ticks", 0, "must be ≥ 1"));
+        }
+        if let Some(c) = &self.front {
+            c.validate()?;
+        }
+        if let Some(b) = &self.bev {
+            b.validate()?;
+        }
+        Ok(())
+    }
+}
+
+/// An action of either mode.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Action {
+    Decision(Decision),
+    Raw(Control),
+}
+
+/// Names of the entries of [`Observation::state`], in order.
+pub const STATE_FIELDS: &[&str] = &[
+    "speed_mps",
+    "steer",
+    "throttle",
+    "brake",
+    "progress_m",
+    "route_length_m",
+    "distance_to_go_m",
+    "command",
+    "time_s",
+    "on_road",
+    "lateral_offset_m",
+    "heading_error_rad",
+    "route_p1_forward_m",
+    "route_p1_right_m",
+    "route_p2_forward_m",
+    "route_p2_right_m",
+    "route_p3_forward_m",
+    "route_p3_right_m",
+    "route_p4_forward_m",
+    "route_p4_right_m",
+    "route_p5_forward_m",
+    "route_p5_right_m",
+    "route_p6_forward_m",
+    "route_p6_right_m",
+    "route_p7_forward_m",
+    "route_p7_right_m",
+    "route_p8_forward_m",
+    "route_p8_right_m",
+    "actor1_present",
+    "actor1_forward_m",
+    "actor1_right_m",
+    "actor1_speed_mps",
+    "actor1_heading_rad",
+    "actor2_present",
+    "actor2_forward_m",
+    "actor2_right_m",
+    "actor2_speed_mps",
+    "actor2_heading_rad",
+    "actor3_present",
+    "actor3_forward_m",
+    "actor3_right_m",
+    "actor3_speed_mps",
+    "actor3_heading_rad",
+    "actor4_present",
+    "actor4_forward_m",
+    "actor4_right_m",
+    "actor4_speed_mps",
+    "actor4_heading_rad",
+    "actor5_present",
+    "actor5_forward_m",
+    "actor5_right_m",
+    "actor5_speed_mps",
+    "actor5_heading_rad",
+    "actor6_present",
+    "actor6_forward_m",
+    "actor6_right_m",
+    "actor6_speed_mps",
+    "actor6_heading_rad",
+    "light_ahead_distance_m",
+    "light_ahead_stop",
+];
+const NEAREST_ACTORS: usize = 6;
+/// Lights and actors farther than this along the route are "none" in the state vector.
+const STATE_HORIZON_M: f64 = 100.0;
+/// A signal head belongs to the route when its stop line lies this close to the route line.
+const LIGHT_ON_ROUTE_M: f64 = 2.0;
+
+/// What the agent sees after a reset or a step.
+#[derive(Debug, Clone)]
+pub struct Observation {
+    pub front: Option<Image>,
+    pub bev: Option<Image>,
+    pub prompt: String,
+    pub state: Vec<f32>,
+}
+
+/// Everything about one decision step.
+#[derive(Debug, Clone)]
+pub struct StepOutcome {
+    pub observation: Observation,
+    /// Gain in S_route / 100; the terminal step adds (S_R4 − S_route) / 100, so an episode's
+    /// rewards sum to S_R4 / 100.
+    pub reward: f64,
+    pub terminated: bool,
+    pub info: StepInfo,
+}
+
+/// The per-step `info` of the env.
+#[derive(Debug, Clone, Serialize)]
+pub struct StepInfo {
+    pub tick: u64,
+    pub time_s: f64,
+    pub decision: u64,
+    pub command: u8,
+    pub progress_m: f64,
+    pub route_length_m: f64,
+    pub distance_to_go_m: f64,
+    pub on_road: bool,
+    pub speed_mps: f64,
+    pub control: Control,
+    /// Contacts during this step's ticks (actor id, class).
+    pub contacts: Vec<Contact>,
+    pub termination_reason: Option<String>,
+    /// Running score terms (final once terminated).
+    pub score_route: f64,
+    pub score_composed: Option<f64>,
+    /// Events recorded so far (collisions, timeouts, ...).
+    pub events: Vec<crate::score::Event>,
+    /// SHA-256 over the bits of every tick's ego state and contacts so far.
+    pub trajectory_hash: String,
+}
+
+/// A running R4 episode.
+#[derive(Debug)]
+pub struct Sim {
+    scenario: ResolvedScenario,
+    config: SimConfig,
+    params: ScoreParams,
+    render_map: Option<Arc<RenderMap>>,
+    tracker: RouteTracker,
+    /// (arc length on the route, index into the world's light views) of the route's signal heads.
+    route_lights: Vec<(f64, usize)>,
+    episode: Option<Episode>,
+}
+
+#[derive(Debug)]
+struct Episode {
+    world: World,
+    bridge: ActuationBridge,
+    score: ScoreTracker,
+    seed: u64,
+    samples: Vec<TrajectorySample>,
+    hasher: Sha256,
+    control: Control,
+    decisions: u64,
+    on_road: bool,
+    last_route_score: f64,
+    started: Instant,
+    terminated: bool,
+}
+
+impl Sim {
+    /// Loads a scenario file and prepares (but does not start) an episode.
+    pub fn new(scenario_path: &Path, config: SimConfig, load: &LoadOptions) -> Result<Sim> {
+        config.validate()?;
+        let scenario = Scenario::load_with(scenario_path, load)?;
+        Self::from_scenario(scenario, config)
+    }
+
+    pub fn from_scenario(scenario: ResolvedScenario, config: SimConfig) -> Result<Sim> {
+        config.validate()?;
+        let render_map = if config.front.is_some() || config.bev.is_some() {
+            Some(Arc::new(RenderMap::build(&scenario.map)))
+        } else {
+            None
+        };
+        let tracker = RouteTracker::new(scenario.ego.route.clone());
+        Ok(Sim {
+            scenario,
+            config,
+            params: ScoreParams::default(),
+            render_map,
+            tracker,
+            route_lights: Vec::new(),
+            episode: None,
+        })
+    }
+
+    pub fn scenario(&self) -> &ResolvedScenario {
+        &self.scenario
+    }
+    pub fn config(&self) -> &SimConfig {
+        &self.config
+    }
+    /// The world of the running episode.
+    pub fn world(&self) -> Result<&World> {
+        self.episode.as_ref().map(|e| &e.world).ok_or_else(not_started)
+    }
+    pub fn route(&self) -> &crate::geom::Polyline {
+        self.tracker.route()
+    }
+    pub fn is_terminated(&self) -> bool {
+        self.episode.as_ref().is_some_and(|e| e.terminated)
+    }
+
+    /// Starts a new episode from t = 0.
+    pub fn reset(&mut self, seed: u64) -> Result<(Observation, StepInfo)> {
+        let world = World::new(&self.scenario, seed)?;
+        let route = self.tracker.route().clone();
+        let start = self.scenario.ego.start.pos;
+        let score = ScoreTracker::new(
+            route.clone(),
+            start,
+            self.scenario.ego.destination,
+            self.scenario.reference_duration_given_s,
+            self.params.clone(),
+        )?;
+        self.route_lights = route_lights(&route, world.lights());
+        let on_road = self.scenario.map.drivable().is_drivable(start);
+        self.episode = Some(Episode {
+            world,
+            bridge: ActuationBridge::new(),
+            score,
+            seed,
+            samples: Vec::with_capacity(1024),
+            hasher: Sha256::new(),
+            control: Control::default(),
+            decisions: 0,
+            on_road,
+            last_route_score: 0.0,
+            started: Instant::now(),
+            terminated: false,
+        });
+        let obs = self.observe()?;
+        let info = self.info(Vec::new())?;
+        Ok((obs, info))
+    }
+
+    /// Applies one action and advances `decision_interval_ticks` ticks (fewer if the episode
+    /// ends on the way).
+    pub fn step(&mut self, action: Action) -> Result<StepOutcome> {
+        let mode = self.config.action_mode;
+        let interval = self.config.decision_interval_ticks;
+        let ep = self.episode.as_mut().ok_or_else(not_started)?;
+        if ep.terminated {
+            return Err(Error::Simulation(
+                "the episode has ended (terminated); call reset() before step()".into(),
+            ));
+        }
+        let control = match (mode, action) {
+            (ActionMode::Decision, Action::Decision(d)) => {
+                check_finite("action.steer", d.steer)?;
+                check_finite("action.target_speed_mps", d.target_speed_mps)?;
+                ep.bridge.apply(Some(d), ep.world.ego().speed_mps)
+            }
+            (ActionMode::Raw, Action::Raw(c)) => {
+                check_finite("action.throttle", c.throttle)?;
+                check_finite("action.brake", c.brake)?;
+                check_finite("action.steer", c.steer)?;
+                Control {
+                    throttle: c.throttle.clamp(0.0, 1.0),
+                    brake: c.brake.clamp(0.0, 1.0),
+                    steer: c.steer.clamp(-1.0, 1.0),
+                }
+            }
+            (m, a) => {
+                return Err(Error::config(
+                    "action",
+                    format!("{a:?}"),
+                    format!("the env's action mode is {m:?}"),
+                ))
+            }
+        };
+        ep.control = control;
+        ep.decisions += 1;
+        let mut step_contacts = Vec::new();
+        for _ in 0..interval {
+            let report = ep.world.tick(&control)?;
+            let contacts: Vec<Contact> =
+                report.contacts.iter().map(|&(actor_id, class)| Contact { actor_id, class }).collect();
+            let tick_input = TickInput {
+                position: report.ego.pose.pos,
+                speed_mps: report.ego.speed_mps,
+                on_road: report.on_road,
+                contacts: &contacts,
+                red_light: report.ran_red_light,
+                stop_sign: false,
+                stop: None,
+            };
+            let termination = ep.score.update(&tick_input);
+            hash_tick(&mut ep.hasher, &report.ego, &contacts);
+            ep.on_road = report.on_road;
+            ep.samples.push(TrajectorySample {
+                tick: report.tick,
+                time_s: report.time_s,
+                x: report.ego.pose.pos.x,
+                y: report.ego.pose.pos.y,
+                yaw: report.ego.pose.yaw,
+                speed_mps: report.ego.speed_mps,
+                on_road: report.on_road,
+                contacts: contacts.clone(),
+                red_light: report.ran_red_light,
+                stop_sign: false,
+                stop: None,
+            });
+            step_contacts.extend(contacts);
+            if termination.is_some() {
+                ep.terminated = true;
+                break;
+            }
+        }
+        let route_score = self.route_score();
+        let ep = self.episode.as_mut().ok_or_else(not_started)?;
+        let mut reward = (route_score - ep.last_route_score) / 100.0;
+        ep.last_route_score = route_score;
+        let terminated = ep.terminated;
+        if terminated {
+            let record = self.score_record()?;
+            reward += (record.score_composed - record.score_route) / 100.0;
+        }
+        let observation = self.observe()?;
+        let info = self.info(step_contacts)?;
+        Ok(StepOutcome { observation, reward, terminated, info })
+    }
+
+    fn route_score(&self) -> f64 {
+        self.episode.as_ref().map_or(0.0, |ep| ep.score.route_score())
+    }
+
+    /// The scene score record so far (final once terminated).
+    pub fn score_record(&self) -> Result<SceneScore> {
+        let ep = self.episode.as_ref().ok_or_else(not_started)?;
+        Ok(ep.score.finish(&RunInfo {
+            scene_id: self.scenario.id.clone(),
+            wall_duration_s: ep.started.elapsed().as_secs_f64(),
+            decisions: ep.decisions,
+            parse_failures: ep.bridge.parse_failures(),
+        }))
+    }
+
+    /// The run log (JSONL: header, one line per tick, end) from which [`crate::score::rescore`]
+    /// recomputes the score without simulating.
+    pub fn episode_log(&self) -> Result<String> {
+        let ep = self.episode.as_ref().ok_or_else(not_started)?;
+        let header = RunHeader::new(
+            self.scenario.id.clone(),
+            self.tracker.route(),
+            self.scenario.ego.start.pos,
+            self.scenario.ego.destination,
+            self.scenario.reference_duration_given_s,
+            self.params.clone(),
+        );
+        let mut out = String::with_capacity(128 * (ep.samples.len() + 2));
+        out.push_str(&LogLine::Header(Box::new(header)).to_json());
+        out.push('\n');
+        for s in &ep.samples {
+            out.push_str(&LogLine::Tick(s.clone()).to_json());
+            out.push('\n');
+        }
+        let footer = RunFooter {
+            wall_duration_s: ep.started.elapsed().as_secs_f64(),
+            decisions: ep.decisions,
+            parse_failures: ep.bridge.parse_failures(),
+            stop: None,
+        };
+        out.push_str(&LogLine::End(footer).to_json());
+        out.push('\n');
+        Ok(out)
+    }
+
+    /// Seed of the running episode.
+    pub fn seed(&self) -> Result<u64> {
+        self.episode.as_ref().map(|e| e.seed).ok_or_else(not_started)
+    }
+
+    pub fn trajectory_hash(&self) -> Result<String> {
+        let ep = self.episode.as_ref().ok_or_else(not_started)?;
+        Ok(hex(&ep.hasher.clone().finalize()))
+    }
+
+    /// The route view (progress, distance to go, 8 future points) at the current ego pose.
+    pub fn route_view(&self) -> Result<RouteView> {
+        let ep = self.episode.as_ref().ok_or_else(not_started)?;
+        Ok(self.tracker.future_points(&ep.world.ego().pose))
+    }
+
+    /// Renders one camera of the current state into `out` (any config; not the observation's).
+    pub fn render_camera(&self, cfg: &CameraConfig, out: &mut Image) -> Result<()> {
+        let ep = self.episode.as_ref().ok_or_else(not_started)?;
+        let map = self.render_map_or_build();
+        let route_pts = self.route_points_world(&ep.world.ego().pose);
+        let frame = frame_input(&ep.world, &route_pts);
+        crate::render::render_camera(&map, &frame, cfg, out)
+    }
+
+    /// Renders a BEV of the current state into `out`.
+    pub fn render_bev(&self, cfg: &BevConfig, out: &mut Image) -> Result<()> {
+        let ep = self.episode.as_ref().ok_or_else(not_started)?;
+        let map = self.render_map_or_build();
+        let route_pts = self.route_points_world(&ep.world.ego().pose);
+        let frame = frame_input(&ep.world, &route_pts);
+        crate::render::render_bev(&map, &frame, cfg, out)
+    }
+
+    fn render_map_or_build(&self) -> Arc<RenderMap> {
+        match &self.render_map {
+            Some(m) => m.clone(),
+            None => Arc::new(RenderMap::build(&self.scenario.map)),
+        }
+    }
+
+    /// The protocol's 8 future route points in the world frame (drawn on the BEV).
+    fn route_points_world(&self, ego: &Pose) -> Vec<Vec2> {
+        self.tracker
+            .future_points(ego)
+            .points
+            .iter()
+            .map(|&(f, r)| ego.pos + ego.forward() * f + ego.right() * r)
+            .collect()
+    }
+
+    fn observe(&self) -> Result<Observation> {
+        let ep = self.episode.as_ref().ok_or_else(not_started)?;
+        let ego = *ep.world.ego();
+        let view = self.tracker.future_points(&ego.pose);
+        let command = navigation_command(&view.points);
+        let prompt = if self.config.prompt {
+            decision_prompt(ego.speed_mps, command, view.distance_to_go_m, &view.points)
+        } else {
+            String::new()
+        };
+        let state = self.state_vector(ep, &ego, &view, command);
+        let (front, bev) = if self.config.front.is_some() || self.config.bev.is_some() {
+            let map = self.render_map_or_build();
+            let route_pts: Vec<Vec2> = view
+                .points
+                .iter()
+                .map(|&(f, r)| ego.pose.pos + ego.pose.forward() * f + ego.pose.right() * r)
+                .collect();
+            let frame = frame_input(&ep.world, &route_pts);
+            let front = match &self.config.front {
+                Some(cfg) => {
+                    let mut img = Image::new(cfg.width, cfg.height);
+                    crate::render::render_camera(&map, &frame, cfg, &mut img)?;
+                    Some(img)
+                }
+                None => None,
+            };
+            let bev = match &self.config.bev {
+                Some(cfg) => {
+                    let mut img = Image::new(cfg.size_px, cfg.size_px);
+                    crate::render::render_bev(&map, &frame, cfg, &mut img)?;
+                    Some(img)
+                }
+                None => None,
+            };
+            (front, bev)
+        } else {
+            (None, None)
+        };
+        Ok(Observation { front, bev, prompt, state })
+    }
+
+    fn state_vector(&self, ep: &Episode, ego: &ActorView, view: &RouteView, command: Command) -> Vec<f32> {
+        let route = self.tracker.route();
+        let l = route.length();
+        let mut s = Vec::with_capacity(STATE_FIELDS.len());
+        let proj = route.project(ego.pose.pos);
+        let (lateral, heading_err) = match proj {
+            Some(p) => (-p.lateral, wrap_angle(ego.pose.yaw - route.heading_at(p.s))),
+            None => (0.0, 0.0),
+        };
+        s.extend_from_slice(&[
+            ego.speed_mps,
+            ep.control.steer,
+            ep.control.throttle,
+            ep.control.brake,
+            view.progress_m,
+            l,
+            view.distance_to_go_m.unwrap_or(0.0),
+            f64::from(command as u8),
+            ep.world.time_s(),
+            if ep.on_road { 1.0 } else { 0.0 },
+            lateral,
+            heading_err,
+        ]);
+        for i in 0..8 {
+            let (f, r) = view.points.get(i).copied().unwrap_or((0.0, 0.0));
+            s.push(f);
+            s.push(r);
+        }
+        // Nearest actors by distance (ties by id, so the order is deterministic).
+        let mut near: Vec<(f64, &ActorView)> = ep
+            .world
+            .actors()
+            .iter()
+            .map(|a| (a.pose.pos.dist(ego.pose.pos), a))
+            .filter(|(d, _)| *d <= STATE_HORIZON_M)
+            .collect();
+        near.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.id.cmp(&b.1.id)));
+        for i in 0..NEAREST_ACTORS {
+            match near.get(i) {
+                Some((_, a)) => {
+                    let (f, r) = ego.pose.to_forward_right(a.pose.pos);
+                    s.extend_from_slice(&[1.0, f, r, a.speed_mps, wrap_angle(a.pose.yaw - ego.pose.yaw)]);
+                }
+                None => s.extend_from_slice(&[0.0; 5]),
+            }
+        }
+        let (dist, stop) = self.light_ahead(ep, view.progress_m);
+        s.push(dist);
+        s.push(stop);
+        s.into_iter().map(|v| v as f32).collect()
+    }
+
+    /// Distance along the route to the next signal head on it, and 1 if it shows red/yellow.
+    fn light_ahead(&self, ep: &Episode, progress_m: f64) -> (f64, f64) {
+        let lights = ep.world.lights();
+        for &(s, i) in &self.route_lights {
+            let d = s - progress_m;
+            if d < 0.0 {
+                continue;
+            }
+            if d > STATE_HORIZON_M {
+                break;
+            }
+            let stop = matches!(lights.get(i).map(|l| l.color), Some(LightColor::Red | LightColor::Yellow));
+            return (d, if stop { 1.0 } else { 0.0 });
+        }
+        (STATE_HORIZON_M, 0.0)
+    }
+
+    fn info(&self, contacts: Vec<Contact>) -> Result<StepInfo> {
+        let ep = self.episode.as_ref().ok_or_else(not_started)?;
+        let ego = ep.world.ego();
+        let view = self.tracker.future_points(&ego.pose);
+        let termination = ep.score.termination();
+        Ok(StepInfo {
+            tick: ep.world.tick_count(),
+            time_s: ep.world.time_s(),
+            decision: ep.decisions,
+            command: navigation_command(&view.points) as u8,
+            progress_m: ep.score.best_progress_m(),
+            route_length_m: ep.score.route_length_m(),
+            distance_to_go_m: view.distance_to_go_m.unwrap_or(0.0),
+            on_road: ep.on_road,
+            speed_mps: ego.speed_mps,
+            control: ep.control,
+            contacts,
+            termination_reason: termination.map(|t| t.reason.as_str().to_owned()),
+            score_route: self.route_score(),
+            score_composed: if ep.terminated { Some(self.score_record()?.score_composed) } else { None },
+            events: ep.score.events().to_vec(),
+            trajectory_hash: hex(&ep.hasher.clone().finalize()),
+        })
+    }
+}
+
+fn not_started() -> Error {
+    Error::Simulation("no episode is running; call reset() before step()".into())
+}
+
+fn check_finite(field: &str, v: f64) -> Result<()> {
+    if v.is_finite() {
+        Ok(())
+    } else {
+        Err(Error::config(field, v, "must be a finite number"))
+    }
+}
+
+fn frame_input<'a>(world: &'a World, route_points: &'a [Vec2]) -> FrameInput<'a> {
+    FrameInput {
+        ego: world.ego(),
+        actors: world.actors(),
+        lights: world.lights(),
+        signs: world.signs(),
+        route_points,
+    }
+}
+
+/// Signal heads whose stop line lies on the route, sorted by arc length.
+fn route_lights(route: &crate::geom::Polyline, lights: &[TrafficLightView]) -> Vec<(f64, usize)> {
+    let mut out: Vec<(f64, usize)> = lights
+        .iter()
+        .enumerate()
+        .filter_map(|(i, l)| {
+            let p = route.project(l.stop_line.pos)?;
+            let aligned = wrap_angle(route.heading_at(p.s) - l.stop_line.yaw).abs() < 0.5;
+            (p.distance <= LIGHT_ON_ROUTE_M && aligned).then_some((p.s, i))
+        })
+        .collect();
+    out.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    out
+}
+
+fn hash_tick(h: &mut Sha256, ego: &ActorView, contacts: &[Contact]) {
+    for v in [ego.pose.pos.x, ego.pose.pos.y, ego.pose.yaw, ego.speed_mps] {
+        h.update(v.to_bits().to_le_bytes());
+    }
+    for c in contacts {
+        h.update(c.actor_id.to_le_bytes());
+    }
+}
+
+fn hex(bytes: &[u8]) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::with_capacity(bytes.len() * 2);
+    for b in bytes {
+        let _ = write!(s, "{b:02x}");
+    }
+    s
+}

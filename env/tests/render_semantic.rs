@@ -1,0 +1,281 @@
+//! Places known actors and signals in front of the camera and checks, through
+//! `project_actors` and pixel colours, that each shows where it should.
+
+use dh_env::geom::{Pose, Vec2};
+use dh_env::map::Network;
+use dh_env::render::{
+    project_actors, render_bev, render_camera, BevConfig, CameraConfig, FrameInput, Image, RenderMap,
+    Renderer,
+};
+use dh_env::view::{ActorKind, ActorView, LightColor, TrafficLightView};
+use std::path::Path;
+use std::sync::OnceLock;
+
+fn world() -> &'static (Network, RenderMap) {
+    static W: OnceLock<(Network, RenderMap)> = OnceLock::new();
+    W.get_or_init(|| {
+        let net =
+            Network::from_file(Path::new("../scenarios/maps/town01/town01.net.xml")).expect("town01 net");
+        let map = RenderMap::build(&net);
+        (net, map)
+    })
+}
+
+/// Ego on the long straight C→T, 100 m after the junction, heading east.
+fn ego_pose() -> Pose {
+    let (net, _) = world();
+    let lane = net.lane_by_id("C2T_1").expect("lane C2T_1");
+    net.lane_position(lane, 100.0)
+}
+
+fn actor(id: u32, kind: ActorKind, fwd: f64, left: f64) -> ActorView {
+    let e = ego_pose();
+    ActorView {
+        id,
+        kind,
+        pose: Pose::new(e.local_to_world(fwd, left), e.yaw),
+        speed_mps: 0.0,
+        length_m: 0.0,
+        width_m: 0.0,
+        height_m: 0.0,
+        color: [40, 90, 200],
+        braking: false,
+    }
+}
+
+fn ego() -> ActorView {
+    ActorView {
+        id: 0,
+        kind: ActorKind::Car,
+        pose: ego_pose(),
+        speed_mps: 0.0,
+        length_m: 4.6,
+        width_m: 1.9,
+        height_m: 1.5,
+        color: [200, 200, 200],
+        braking: false,
+    }
+}
+
+fn frame<'a>(
+    ego: &'a ActorView,
+    actors: &'a [ActorView],
+    lights: &'a [TrafficLightView],
+    route: &'a [Vec2],
+) -> FrameInput<'a> {
+    FrameInput { ego, actors, lights, signs: &[], route_points: route }
+}
+
+#[test]
+fn actors_ahead_project_where_expected() {
+    let (_, map) = world();
+    let e = ego();
+    let actors = [
+        actor(1, ActorKind::Car, 20.0, 0.0),
+        actor(2, ActorKind::Pedestrian, 15.0, 4.0),
+        actor(3, ActorKind::Cyclist, 25.0, -4.0),
+    ];
+    let cfg = CameraConfig::front();
+    let p = project_actors(map, &frame(&e, &actors, &[], &[]), &cfg).unwrap();
+    let get = |id| p.iter().find(|a| a.id == id).unwrap_or_else(|| panic!("actor {id} not projected: {p:?}"));
+    let car = get(1);
+    assert!((car.center_px[0] - 400.0).abs() < 5.0, "{car:?}");
+    assert!(car.visible_fraction > 0.95 && car.pixel_count > 500, "{car:?}");
+    assert!((car.distance_m - 20.0).abs() < 1e-9);
+    let ped = get(2);
+    assert!(ped.center_px[0] < 330.0 && ped.visible_fraction > 0.9 && ped.pixel_count > 100, "{ped:?}");
+    let cyc = get(3);
+    assert!(cyc.center_px[0] > 440.0 && cyc.visible_fraction > 0.9, "{cyc:?}");
+    // The box contains the centre.
+    for a in &p {
+        assert!(a.bbox_px[0] <= a.center_px[0] && a.center_px[0] <= a.bbox_px[2], "{a:?}");
+        assert!(a.bbox_px[1] <= a.center_px[1] && a.center_px[1] <= a.bbox_px[3], "{a:?}");
+    }
+}
+
+#[test]
+fn occluded_actor_has_low_visible_fraction() {
+    let (_, map) = world();
+    let e = ego();
+    let actors = [actor(1, ActorKind::Bus, 15.0, 0.0), actor(2, ActorKind::Car, 35.0, 0.0)];
+    let p = project_actors(map, &frame(&e, &actors, &[], &[]), &CameraConfig::front()).unwrap();
+    let bus = p.iter().find(|a| a.id == 1).unwrap();
+    assert!(bus.visible_fraction > 0.95);
+    if let Some(car) = p.iter().find(|a| a.id == 2) {
+        assert!(car.visible_fraction < 0.2, "{car:?}");
+    }
+}
+
+#[test]
+fn actor_behind_camera_is_not_drawn() {
+    let (_, map) = world();
+    let e = ego();
+    let behind = [actor(1, ActorKind::Truck, -15.0, 0.0)];
+    let cfg = CameraConfig { width: 320, height: 180, ..CameraConfig::front() };
+    let p = project_actors(map, &frame(&e, &behind, &[], &[]), &cfg).unwrap();
+    assert!(p.is_empty(), "{p:?}");
+    let (mut a, mut b) = (Image::default(), Image::default());
+    render_camera(map, &frame(&e, &behind, &[], &[]), &cfg, &mut a).unwrap();
+    render_camera(map, &frame(&e, &[], &[], &[]), &cfg, &mut b).unwrap();
+    assert_eq!(a, b);
+    // ...while the same truck ahead changes the picture.
+    let ahead = [actor(1, ActorKind::Truck, 15.0, 0.0)];
+    render_camera(map, &frame(&e, &ahead, &[], &[]), &cfg, &mut a).unwrap();
+    assert_ne!(a, b);
+}
+
+fn lamp_pixels(img: &Image) -> (usize, usize, usize) {
+    let (mut red, mut yellow, mut green) = (0, 0, 0);
+    for px in img.data.chunks_exact(3) {
+        let (r, g, b) = (px[0] as i32, px[1] as i32, px[2] as i32);
+        if r > 230 && g < 60 && b < 60 {
+            red += 1;
+        }
+        if r > 230 && g > 180 && b < 40 {
+            yellow += 1;
+        }
+        if g > 230 && r < 60 && b < 120 {
+            green += 1;
+        }
+    }
+    (red, yellow, green)
+}
+
+#[test]
+fn traffic_light_colour_reads_at_30_m() {
+    let (_, map) = world();
+    let e = ego();
+    let ep = ego_pose();
+    // Unknown lane: the head hangs 15 m past the stop line, so 15 + 15 = 30 m from the ego.
+    let light = |color| TrafficLightView {
+        tl_id: "t".into(),
+        lane_id: "no-such-lane".into(),
+        stop_line: Pose::new(ep.local_to_world(15.0, 0.0), ep.yaw),
+        lane_width_m: 3.2,
+        color,
+    };
+    let mut img = Image::default();
+    for (color, want) in [(LightColor::Red, 0), (LightColor::Yellow, 1), (LightColor::Green, 2)] {
+        render_camera(map, &frame(&e, &[], &[light(color)], &[]), &CameraConfig::front(), &mut img).unwrap();
+        let counts = lamp_pixels(&img);
+        let arr = [counts.0, counts.1, counts.2];
+        assert!(arr[want] >= 12, "{color:?}: {counts:?}");
+        for (k, n) in arr.iter().enumerate() {
+            if k != want {
+                assert_eq!(*n, 0, "{color:?}: {counts:?}");
+            }
+        }
+    }
+}
+
+#[test]
+fn bev_draws_route_and_ego_as_the_protocol_says() {
+    let (_, map) = world();
+    let e = ego();
+    let ep = ego_pose();
+    let route: Vec<Vec2> =
+        [5.0, 10.0, 15.0, 20.0, 30.0, 40.0].iter().map(|d| ep.local_to_world(*d, 0.0)).collect();
+    let mut img = Image::default();
+    render_bev(map, &frame(&e, &[], &[], &route), &BevConfig::default(), &mut img).unwrap();
+    assert_eq!((img.width, img.height), (800, 800));
+    // Ego disc: yellow at the centre.
+    assert_eq!(img.pixel(400, 400).unwrap(), [255, 215, 0]);
+    // Route line red at 7.5 m ahead (8 px/m, forward = up).
+    assert_eq!(img.pixel(400, 400 - 60).unwrap(), [230, 20, 20]);
+    // Last point (40 m): white dot centre, red outline just inside its radius.
+    assert_eq!(img.pixel(400, 80).unwrap(), [255, 255, 255]);
+    assert_eq!(img.pixel(400 + 5, 80).unwrap(), [230, 20, 20]);
+    // The first point (5 m) carries no dot; nothing is drawn between the ego and it.
+    assert_eq!(img.pixel(400, 357).unwrap(), [230, 20, 20]);
+    assert_eq!(img.pixel(400, 370).unwrap(), [100, 100, 106]);
+}
+
+#[test]
+fn rendering_is_deterministic_regardless_of_history() {
+    let (_, map) = world();
+    let e = ego();
+    let actors = [actor(1, ActorKind::Car, 12.0, 0.0), actor(2, ActorKind::Pedestrian, 9.0, -3.0)];
+    let f = frame(&e, &actors, &[], &[]);
+    let cfg = CameraConfig { supersample: 2, width: 200, height: 112, ..CameraConfig::front() };
+    let mut r1 = Renderer::new();
+    let mut r2 = Renderer::new();
+    let (mut a, mut b, mut junk) = (Image::default(), Image::default(), Image::default());
+    r1.render_camera(map, &f, &cfg, &mut a).unwrap();
+    r2.render_camera(map, &frame(&e, &[], &[], &[]), &CameraConfig::chase(), &mut junk).unwrap();
+    r2.render_bev(map, &f, &BevConfig::default(), &mut junk).unwrap();
+    r2.render_camera(map, &f, &cfg, &mut b).unwrap();
+    assert_eq!(a, b);
+}
+
+#[test]
+fn invalid_configs_are_errors() {
+    let (_, map) = world();
+    let e = ego();
+    let mut img = Image::default();
+    let bad = CameraConfig { fov_deg: 0.0, ..CameraConfig::front() };
+    let err = render_camera(map, &frame(&e, &[], &[], &[]), &bad, &mut img).unwrap_err();
+    assert!(err.to_string().contains("fov_deg"), "{err}");
+    let bad = BevConfig { px_per_m: f64::NAN, ..BevConfig::default() };
+    assert!(render_bev(map, &frame(&e, &[], &[], &[]), &bad, &mut img).is_err());
+    let mut nan_ego = e;
+    nan_ego.pose.yaw = f64::NAN;
+    assert!(render_camera(map, &frame(&nan_ego, &[], &[], &[]), &CameraConfig::front(), &mut img).is_err());
+}
+
+#[test]
+fn surround_rig_sees_an_actor_in_the_back_camera_only() {
+    let (_, map) = world();
+    let e = ego();
+    let behind = [actor(1, ActorKind::Car, -15.0, 0.0)];
+    for (name, cfg) in CameraConfig::surround_rig() {
+        let p = project_actors(map, &frame(&e, &behind, &[], &[]), &cfg).unwrap();
+        assert_eq!(!p.is_empty(), name == "CAM_BACK", "{name}: {p:?}");
+    }
+}
+
+#[test]
+fn gif_writer_writes_frames_and_rejects_size_changes() {
+    let dir = std::env::temp_dir().join(format!("dh_render_gif_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("v.gif");
+    let mut w = dh_env::render::GifWriter::create(&path, 10).unwrap();
+    let mut img = Image::new(32, 18);
+    w.push(&img).unwrap();
+    img.data.iter_mut().for_each(|v| *v = 200);
+    w.push(&img).unwrap();
+    assert!(w.push(&Image::new(16, 16)).is_err());
+    assert_eq!(w.frames(), 2);
+    drop(w);
+    assert!(std::fs::metadata(&path).unwrap().len() > 0);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn empty_network_renders_sky_ground_and_actors() {
+    let map = RenderMap::from_parts(&[], &[], &[]);
+    let e = ego();
+    let actors = [actor(1, ActorKind::Car, 10.0, 0.0)];
+    let mut img = Image::default();
+    let cfg = CameraConfig { width: 160, height: 90, ..CameraConfig::front() };
+    render_camera(&map, &frame(&e, &actors, &[], &[]), &cfg, &mut img).unwrap();
+    let p = project_actors(&map, &frame(&e, &actors, &[], &[]), &cfg).unwrap();
+    assert_eq!(p.len(), 1);
+    render_bev(&map, &frame(&e, &actors, &[], &[]), &BevConfig::rl(), &mut img).unwrap();
+    assert_eq!(img.pixel(64, 64).unwrap(), [255, 215, 0]);
+}
+
+#[test]
+fn real_net_builds_fast_when_present() {
+    let path = Path::new("../../shared/official/Close_Loop_Evaluation/Carla_Simulation/Co-Simulation/Sumo/tongji/tongji.net.xml");
+    if !path.exists() {
+        eprintln!("skipping: {} not present", path.display());
+        return;
+    }
+    let net = Network::from_file(path).unwrap();
+    let t = std::time::Instant::now();
+    let map = RenderMap::build(&net);
+    let (tris, segs, props) = map.stats();
+    assert!(tris > 10_000 && segs > 5_000 && props > 0, "{:?}", map.stats());
+    // Debug builds are slower; the release figure is ~70 ms.
+    assert!(t.elapsed().as_secs_f64() < 10.0);
+}

@@ -1,0 +1,220 @@
+//! `Sim`: the R4 episode (`dh_env::sim::Sim`) for the Python env facade. One call per decision;
+//! the GIL is released while the world ticks and renders; images leave as owned numpy arrays.
+
+use crate::errors::to_pyerr;
+use crate::json::to_py;
+use dh_agents::expert::{Expert, ExpertParams};
+use dh_env::drive::{ActuationBridge, Control, Decision};
+use dh_env::render::{CameraConfig, Image};
+use dh_env::scenario::{LoadOptions, MapCache};
+use dh_env::sim::{Action, ActionMode, Observation, Sim, SimConfig, StepInfo};
+use numpy::ndarray::Array3;
+use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, OnceLock};
+
+/// Networks parsed once per process, shared by every env on the same map.
+fn map_cache() -> Arc<MapCache> {
+    static CACHE: OnceLock<Arc<MapCache>> = OnceLock::new();
+    CACHE.get_or_init(|| Arc::new(MapCache::new())).clone()
+}
+
+fn err(py: Python<'_>, e: dh_env::Error) -> PyErr {
+    to_pyerr(py, e)
+}
+
+#[pyclass(name = "Sim", module = "drivehierarchy._core")]
+pub struct PySim {
+    inner: Sim,
+    expert: Expert,
+    /// Turns the expert's decisions into raw controls when the env runs in raw mode.
+    expert_bridge: ActuationBridge,
+}
+
+#[pymethods]
+impl PySim {
+    #[new]
+    #[pyo3(signature = (scenario, config_json, sumo_home=None))]
+    fn new(py: Python<'_>, scenario: &str, config_json: &str, sumo_home: Option<PathBuf>) -> PyResult<Self> {
+        let config = SimConfig::from_json(config_json).map_err(|e| err(py, e))?;
+        let load = LoadOptions { sumo_home, cache: Some(map_cache()) };
+        let path = Path::new(scenario).to_path_buf();
+        let inner = py.detach(|| Sim::new(&path, config, &load)).map_err(|e| err(py, e))?;
+        let expert = Expert::new(ExpertParams::default()).map_err(|e| err(py, e))?;
+        Ok(PySim { inner, expert, expert_bridge: ActuationBridge::new() })
+    }
+
+    #[getter]
+    fn scenario_id(&self) -> String {
+        self.inner.scenario().id.clone()
+    }
+
+    #[getter]
+    fn category(&self) -> String {
+        self.inner.scenario().category.clone()
+    }
+
+    #[getter]
+    fn route_length_m(&self) -> f64 {
+        self.inner.scenario().route_length_m()
+    }
+
+    /// Starts an episode: `(observation, info)`.
+    fn reset<'py>(&mut self, py: Python<'py>, seed: u64) -> PyResult<(Bound<'py, PyDict>, Bound<'py, PyAny>)> {
+        let inner = &mut self.inner;
+        let (obs, info) = py.detach(|| inner.reset(seed)).map_err(|e| err(py, e))?;
+        self.expert.reset();
+        self.expert_bridge.reset();
+        Ok((obs_to_py(py, obs)?, info_to_py(py, &info)?))
+    }
+
+    /// One decision: `(observation, reward, terminated, truncated, info)`.
+    #[allow(clippy::type_complexity)]
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        action: PyReadonlyArray1<'py, f64>,
+    ) -> PyResult<(Bound<'py, PyDict>, f64, bool, bool, Bound<'py, PyAny>)> {
+        let a = action.as_slice().map_err(|e| pyo3::exceptions::PyValueError::new_err(e.to_string()))?;
+        let action = match (self.inner.config().action_mode, a) {
+            (ActionMode::Decision, [steer, target]) => {
+                Action::Decision(Decision { steer: *steer, target_speed_mps: *target })
+            }
+            (ActionMode::Raw, [throttle, brake, steer]) => {
+                Action::Raw(Control { throttle: *throttle, brake: *brake, steer: *steer })
+            }
+            (mode, _) => {
+                let want = if mode == ActionMode::Decision { 2 } else { 3 };
+                return Err(err(
+                    py,
+                    dh_env::Error::config("action", format!("{a:?}"), format!("expected {want} numbers")),
+                ));
+            }
+        };
+        let inner = &mut self.inner;
+        let out = py.detach(|| inner.step(action)).map_err(|e| err(py, e))?;
+        Ok((obs_to_py(py, out.observation)?, out.reward, out.terminated, false, info_to_py(py, &out.info)?))
+    }
+
+    /// The privileged expert's action for the current state, in the env's action mode.
+    fn expert_action<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let world = self.inner.world().map_err(|e| err(py, e))?;
+        let a = self.expert.act_in_world(world, self.inner.route());
+        let decision = Decision::from(a);
+        let v = match self.inner.config().action_mode {
+            ActionMode::Decision => vec![decision.steer, decision.target_speed_mps],
+            ActionMode::Raw => {
+                let speed = world.ego().speed_mps;
+                let c = self.expert_bridge.apply(Some(decision), speed);
+                vec![c.throttle, c.brake, c.steer]
+            }
+        };
+        Ok(PyArray1::from_vec(py, v))
+    }
+
+    /// Renders the current state: `"front"` (the observation's camera or the protocol default),
+    /// `"bev"`, or `"chase"`.
+    fn render<'py>(&self, py: Python<'py>, kind: &str) -> PyResult<Bound<'py, PyAny>> {
+        let cfg = self.inner.config();
+        let mut img = Image::default();
+        let inner = &self.inner;
+        let res = match kind {
+            "front" => {
+                let cam = cfg.front.unwrap_or_default();
+                py.detach(|| inner.render_camera(&cam, &mut img))
+            }
+            "chase" => {
+                let cam = CameraConfig::chase();
+                py.detach(|| inner.render_camera(&cam, &mut img))
+            }
+            "bev" => {
+                let bev = cfg.bev.unwrap_or_default();
+                py.detach(|| inner.render_bev(&bev, &mut img))
+            }
+            other => {
+                return Err(err(
+                    py,
+                    dh_env::Error::config("render.kind", other, "expected 'front', 'bev' or 'chase'"),
+                ))
+            }
+        };
+        res.map_err(|e| err(py, e))?;
+        image_to_py(py, img)
+    }
+
+    /// The scene score record so far (final once terminated), as a dict.
+    fn score<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let rec = self.inner.score_record().map_err(|e| err(py, e))?;
+        let v = serde_json::to_value(&rec).map_err(|e| err(py, dh_env::Error::Simulation(e.to_string())))?;
+        to_py(py, &v)
+    }
+
+    /// The run log (JSONL) that `rescore` reads.
+    fn episode_log(&self, py: Python<'_>) -> PyResult<String> {
+        self.inner.episode_log().map_err(|e| err(py, e))
+    }
+
+    #[getter]
+    fn trajectory_hash(&self, py: Python<'_>) -> PyResult<String> {
+        self.inner.trajectory_hash().map_err(|e| err(py, e))
+    }
+}
+
+fn image_to_py(py: Python<'_>, img: Image) -> PyResult<Bound<'_, PyAny>> {
+    let (w, h) = (img.width as usize, img.height as usize);
+    let arr = Array3::from_shape_vec((h, w, 3), img.data)
+        .map_err(|e| err(py, dh_env::Error::Render(format!("frame buffer: {e}"))))?;
+    Ok(arr.into_pyarray(py).into_any())
+}
+
+fn obs_to_py(py: Python<'_>, obs: Observation) -> PyResult<Bound<'_, PyDict>> {
+    let d = PyDict::new(py);
+    if let Some(img) = obs.front {
+        d.set_item("front", image_to_py(py, img)?)?;
+    }
+    if let Some(img) = obs.bev {
+        d.set_item("bev", image_to_py(py, img)?)?;
+    }
+    d.set_item("prompt", obs.prompt)?;
+    d.set_item("state", PyArray1::from_vec(py, obs.state))?;
+    Ok(d)
+}
+
+fn info_to_py<'py>(py: Python<'py>, info: &StepInfo) -> PyResult<Bound<'py, PyAny>> {
+    let v = serde_json::to_value(info).map_err(|e| err(py, dh_env::Error::Simulation(e.to_string())))?;
+    to_py(py, &v)
+}
+
+/// Recomputes a scene score from a run log (JSONL text) without simulating; returns JSON.
+#[pyfunction]
+pub fn rescore(py: Python<'_>, log: &str) -> PyResult<String> {
+    let run = dh_env::score::RunLog::from_jsonl(log, "episode_log").map_err(|e| err(py, e))?;
+    let rec = run.rescore().map_err(|e| err(py, e))?;
+    serde_json::to_string(&rec).map_err(|e| err(py, dh_env::Error::Simulation(e.to_string())))
+}
+
+/// Validates a scenario file; returns its summary as JSON.
+#[pyfunction]
+#[pyo3(signature = (path, sumo_home=None))]
+pub fn validate_scenario(py: Python<'_>, path: &str, sumo_home: Option<PathBuf>) -> PyResult<String> {
+    let opts = LoadOptions { sumo_home, cache: Some(map_cache()) };
+    let s = py.detach(|| dh_env::scenario::validate_with(path, &opts)).map_err(|e| err(py, e))?;
+    serde_json::to_string(&s).map_err(|e| err(py, dh_env::Error::Simulation(e.to_string())))
+}
+
+/// The default configs as JSON (what `R4Config` mirrors).
+#[pyfunction]
+pub fn default_sim_config() -> String {
+    serde_json::to_string(&SimConfig::default()).unwrap_or_default()
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PySim>()?;
+    m.add_function(wrap_pyfunction!(rescore, m)?)?;
+    m.add_function(wrap_pyfunction!(validate_scenario, m)?)?;
+    m.add_function(wrap_pyfunction!(default_sim_config, m)?)?;
+    m.add("STATE_FIELDS", dh_env::sim::STATE_FIELDS.to_vec())?;
+    Ok(())
+}
