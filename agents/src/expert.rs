@@ -6,16 +6,24 @@
 //! decision; target speed turned into throttle/brake by a P-law). So it is scored on the same
 //! routes and interface as the models it is compared with.
 //!
-//! * Lateral: pure pursuit from the rear axle (where the bicycle's velocity is along the heading,
-//!   so `tan δ = L κ` holds exactly) on the route, evaluated on the pose predicted half a hold
-//!   ahead; the command is kept inside the window from which the steer needed at each of the next
-//!   decisions is still reachable under the bridge's rate limit (pre-steering before curves).
+//! * Lateral: the base law is pure pursuit from the rear axle (where the bicycle's velocity is
+//!   along the heading, so `tan δ = L κ` holds exactly), evaluated on the pose predicted half a
+//!   hold ahead and kept inside the window from which the steer needed at each of the next
+//!   decisions stays reachable under the rate limit (pre-steering before curves). The command is
+//!   then chosen among the steers reachable from the last one by simulating the ego's bicycle
+//!   model under each, followed by the base law, and keeping the best-tracking one.
 //! * Longitudinal: the minimum of cruise, the speed limit, a curve-speed profile (lateral
-//!   acceleration and steer-rate bounds, braked into at a comfortable deceleration), stops before
-//!   actors predicted in the route corridor, stops before red / yellow lights, and a time-headway
-//!   law behind a lead vehicle.
+//!   acceleration and steer-rate bounds, braked into at a comfortable deceleration; no
+//!   acceleration while the wheel is still turned), stops before actors in or predicted into the
+//!   route corridor (unless the ego clears the spot well before they arrive), stops before red /
+//!   yellow lights on the route, and a time-headway law behind a lead vehicle.
+//! * Stall guard: the protocol ends an episode after 5 s below 1 km/h, so when held at rest by a
+//!   light or a standing actor the expert creeps a few centimetres every few seconds.
 //! * Optional local planner: with a drivable-area oracle, a static obstacle blocking the route is
-//!   passed by offsetting the pursuit path laterally into free drivable space.
+//!   passed by offsetting the pursuit path laterally into free same-direction drivable space.
+//!
+//! State: the expert assumes each [`Expert::act`] output reaches the bridge (one call per
+//! decision); [`Expert::reset`] at every episode start.
 
 use dh_env::geom::{wrap_angle, Polyline, Pose, Projection, Vec2};
 use dh_env::map::{LaneIdx, Network};
@@ -373,7 +381,7 @@ fn project_window(route: &Polyline, p: Vec2, s_lo: f64, s_hi: f64) -> Option<Pro
             break;
         }
         let (t, d2) = dh_env::geom::closest_on_segment(p, pts[i], pts[i + 1]);
-        if best.map_or(true, |b| d2 < b.0) {
+        if best.is_none_or(|b| d2 < b.0) {
             best = Some((d2, i, t));
         }
     }
