@@ -335,3 +335,37 @@ fn does_not_pass_a_car_queuing_at_a_light() {
     assert!(!o.collided && !o.reached);
     assert!(o.actions.iter().all(|a| a.path_offset_m == 0.0), "overtook a queuing car");
 }
+
+#[test]
+fn lead_braking_sweep_never_collides() {
+    // 30 leads: speed 6–13 m/s, 15–35 m ahead of an ego at the same speed, braking at 4–8 m/s²
+    // to a stop after 2–8 s, standing 2 s, then driving on.
+    let mut rng = Lcg(11);
+    for case in 0..30 {
+        let mut sim = Sim::new(straight(400.0));
+        let v0 = 6.0 + 7.0 * rng.next();
+        let gap = 15.0 + 20.0 * rng.next();
+        let decel = 4.0 + 4.0 * rng.next();
+        let t_brake = 2.0 + 6.0 * rng.next();
+        sim.start_speed = v0;
+        let t_stop = t_brake + v0 / decel;
+        sim.actors.push(Scripted {
+            view: actor(2, ActorKind::Car, Vec2::new(gap + 4.6, 0.0), 0.0, v0, 4.6, 1.9),
+            speed: Box::new(move |t| {
+                if t < t_brake {
+                    v0
+                } else if t < t_stop {
+                    v0 - decel * (t - t_brake)
+                } else if t < t_stop + 2.0 {
+                    0.0
+                } else {
+                    (2.0 * (t - t_stop - 2.0)).min(v0)
+                }
+            }),
+        });
+        let o = sim.run(ExpertParams::default());
+        let name = format!("case {case}: v0={v0:.1} gap={gap:.0} decel={decel:.1} t_brake={t_brake:.1}");
+        assert!(!o.collided && o.reached, "{name}: collided={} reached={}", o.collided, o.reached);
+        assert!(o.min_clearance_m > 1.0, "{name}: came within {:.2} m", o.min_clearance_m);
+    }
+}
