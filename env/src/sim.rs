@@ -475,6 +475,15 @@ impl Sim {
         crate::render::render_bev(&map, &frame, cfg, out)
     }
 
+    /// Every actor the camera sees (pixel box, centre, distance, visible fraction).
+    pub fn project_actors(&self, cfg: &CameraConfig) -> Result<Vec<crate::render::ProjectedActor>> {
+        let ep = self.episode.as_ref().ok_or_else(not_started)?;
+        let map = self.render_map_or_build();
+        let route_pts = self.route_points_world(&ep.world.ego().pose);
+        let frame = frame_input(&ep.world, &route_pts);
+        crate::render::project_actors(&map, &frame, cfg)
+    }
+
     fn render_map_or_build(&self) -> Arc<RenderMap> {
         match &self.render_map {
             Some(m) => m.clone(),

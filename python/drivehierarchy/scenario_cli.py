@@ -6,7 +6,7 @@ import argparse
 import json
 
 from drivehierarchy import DriveHierarchyError, _core
-from drivehierarchy.scenarios import builtin_scenarios, scenario_id
+from drivehierarchy.scenarios import builtin_scenarios, scenario_id, sumo_home
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -23,7 +23,7 @@ def _validate(args: argparse.Namespace) -> int:
     bad = 0
     for f in args.files:
         try:
-            summary = json.loads(_core.validate_scenario(f))
+            summary = json.loads(_core.validate_scenario(f, sumo_home()))
         except DriveHierarchyError as exc:
             bad += 1
             print(f"INVALID {exc}")

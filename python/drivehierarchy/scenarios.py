@@ -6,7 +6,7 @@ from pathlib import Path
 
 from drivehierarchy._core import ScenarioError
 
-DEFAULT_SCENARIO = "03_turning/town01_right_turn"
+DEFAULT_SCENARIO = "03_turning/town01_right_turn_signalised"
 
 
 def builtin_root() -> Path:
@@ -37,4 +37,15 @@ def resolve_scenario(scenario: str | Path | None) -> str:
     if candidate.is_file():
         return str(candidate)
     known = ", ".join(scenario_id(q) for q in builtin_scenarios()) or "none"
-    raise ScenarioError(f"scenario `{scenario}`: not a file and not a built-in scenario id (built-in: {known})")
+    raise ScenarioError(
+        f"scenario `{scenario}`: not a file and not a built-in scenario id (built-in: {known})"
+    )
+
+
+def sumo_home() -> str | None:
+    """SUMO_HOME of the installed `eclipse-sumo` package (for `sumo:` map paths), if any."""
+    try:
+        import sumo
+    except ImportError:
+        return None
+    return str(sumo.SUMO_HOME)

@@ -5,13 +5,13 @@ use crate::errors::to_pyerr;
 use crate::json::to_py;
 use dh_agents::expert::{Expert, ExpertParams};
 use dh_env::drive::{ActuationBridge, Control, Decision};
-use dh_env::render::{CameraConfig, Image};
+use dh_env::render::{BevConfig, CameraConfig, GifWriter, Image};
 use dh_env::scenario::{LoadOptions, MapCache};
 use dh_env::sim::{Action, ActionMode, Observation, Sim, SimConfig, StepInfo};
 use numpy::ndarray::Array3;
 use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyList};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock};
 
@@ -62,7 +62,11 @@ impl PySim {
     }
 
     /// Starts an episode: `(observation, info)`.
-    fn reset<'py>(&mut self, py: Python<'py>, seed: u64) -> PyResult<(Bound<'py, PyDict>, Bound<'py, PyAny>)> {
+    fn reset<'py>(
+        &mut self,
+        py: Python<'py>,
+        seed: u64,
+    ) -> PyResult<(Bound<'py, PyDict>, Bound<'py, PyAny>)> {
         let inner = &mut self.inner;
         let (obs, info) = py.detach(|| inner.reset(seed)).map_err(|e| err(py, e))?;
         self.expert.reset();
@@ -144,6 +148,58 @@ impl PySim {
         image_to_py(py, img)
     }
 
+    /// Renders any camera (full `CameraConfig` as JSON) at the current state.
+    fn render_camera<'py>(&self, py: Python<'py>, config_json: &str) -> PyResult<Bound<'py, PyAny>> {
+        let cam: CameraConfig = parse_json(py, "camera", config_json)?;
+        cam.validate().map_err(|e| err(py, e))?;
+        let mut img = Image::default();
+        let inner = &self.inner;
+        py.detach(|| inner.render_camera(&cam, &mut img)).map_err(|e| err(py, e))?;
+        image_to_py(py, img)
+    }
+
+    /// Renders a BEV (full `BevConfig` as JSON) at the current state.
+    fn render_bev<'py>(&self, py: Python<'py>, config_json: &str) -> PyResult<Bound<'py, PyAny>> {
+        let bev: BevConfig = parse_json(py, "bev", config_json)?;
+        bev.validate().map_err(|e| err(py, e))?;
+        let mut img = Image::default();
+        let inner = &self.inner;
+        py.detach(|| inner.render_bev(&bev, &mut img)).map_err(|e| err(py, e))?;
+        image_to_py(py, img)
+    }
+
+    /// The six surround cameras (nuScenes-like rig): `{CAM_FRONT: array, ...}`.
+    fn render_surround<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        for (name, cam) in CameraConfig::surround_rig() {
+            let mut img = Image::default();
+            let inner = &self.inner;
+            py.detach(|| inner.render_camera(&cam, &mut img)).map_err(|e| err(py, e))?;
+            d.set_item(name, image_to_py(py, img)?)?;
+        }
+        Ok(d)
+    }
+
+    /// Actors visible to a camera: id, bbox_px, center_px, distance_m, visible_fraction, pixel_count.
+    fn project_actors<'py>(&self, py: Python<'py>, config_json: &str) -> PyResult<Bound<'py, PyList>> {
+        let cam: CameraConfig = parse_json(py, "camera", config_json)?;
+        cam.validate().map_err(|e| err(py, e))?;
+        let inner = &self.inner;
+        let found = py.detach(|| inner.project_actors(&cam)).map_err(|e| err(py, e))?;
+        let out = PyList::empty(py);
+        for a in found {
+            let d = PyDict::new(py);
+            d.set_item("id", a.id)?;
+            d.set_item("bbox_px", a.bbox_px.to_vec())?;
+            d.set_item("center_px", a.center_px.to_vec())?;
+            d.set_item("distance_m", a.distance_m)?;
+            d.set_item("visible_fraction", a.visible_fraction)?;
+            d.set_item("pixel_count", a.pixel_count)?;
+            out.append(d)?;
+        }
+        Ok(out)
+    }
+
     /// The scene score record so far (final once terminated), as a dict.
     fn score<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         let rec = self.inner.score_record().map_err(|e| err(py, e))?;
@@ -159,6 +215,53 @@ impl PySim {
     #[getter]
     fn trajectory_hash(&self, py: Python<'_>) -> PyResult<String> {
         self.inner.trajectory_hash().map_err(|e| err(py, e))
+    }
+}
+
+fn parse_json<T: serde::de::DeserializeOwned>(py: Python<'_>, field: &str, text: &str) -> PyResult<T> {
+    serde_json::from_str(text).map_err(|e| err(py, dh_env::Error::config(field, text, e.to_string())))
+}
+
+/// Animated GIF of RGB frames (H×W×3 uint8), e.g. an episode's front camera.
+#[pyclass(name = "GifWriter", module = "drivehierarchy._core")]
+pub struct PyGifWriter {
+    inner: Option<GifWriter>,
+}
+
+#[pymethods]
+impl PyGifWriter {
+    #[new]
+    #[pyo3(signature = (path, fps=4))]
+    fn new(py: Python<'_>, path: PathBuf, fps: u32) -> PyResult<Self> {
+        Ok(PyGifWriter { inner: Some(GifWriter::create(path, fps).map_err(|e| err(py, e))?) })
+    }
+
+    fn push(&mut self, py: Python<'_>, frame: numpy::PyReadonlyArray3<'_, u8>) -> PyResult<()> {
+        let view = frame.as_array();
+        let shape = view.shape();
+        if shape[2] != 3 {
+            return Err(err(
+                py,
+                dh_env::Error::config("frame", format!("{shape:?}"), "expected H×W×3 uint8"),
+            ));
+        }
+        let img =
+            Image { width: shape[1] as u32, height: shape[0] as u32, data: view.iter().copied().collect() };
+        let w = self
+            .inner
+            .as_mut()
+            .ok_or_else(|| err(py, dh_env::Error::Render("the GIF writer is closed".into())))?;
+        py.detach(|| w.push(&img)).map_err(|e| err(py, e))
+    }
+
+    /// Finishes the file (also done when the writer is garbage-collected).
+    fn close(&mut self) {
+        self.inner = None;
+    }
+
+    #[getter]
+    fn frames(&self) -> usize {
+        self.inner.as_ref().map_or(0, |w| w.frames())
     }
 }
 
@@ -212,6 +315,7 @@ pub fn default_sim_config() -> String {
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PySim>()?;
+    m.add_class::<PyGifWriter>()?;
     m.add_function(wrap_pyfunction!(rescore, m)?)?;
     m.add_function(wrap_pyfunction!(validate_scenario, m)?)?;
     m.add_function(wrap_pyfunction!(default_sim_config, m)?)?;

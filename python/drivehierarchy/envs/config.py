@@ -25,6 +25,8 @@ class CameraConfig:
     pitch_deg: float = 5.0
     yaw_deg: float = 0.0
     supersample: int = 1
+    draw_ego: bool = False
+    draw_distance_m: float = 200.0
 
 
 @dataclass(frozen=True)
@@ -33,6 +35,7 @@ class BevConfig:
 
     size_px: int = 800
     px_per_m: float = 8.0
+    route_dots_last: int = 3
 
 
 @dataclass(frozen=True)
@@ -56,7 +59,8 @@ class R4Config:
             raise ConfigError(f"config `action_mode` = {self.action_mode!r}: expected 'decision' or 'raw'")
         if not isinstance(self.decision_interval_ticks, int) or self.decision_interval_ticks < 1:
             raise ConfigError(
-                f"config `decision_interval_ticks` = {self.decision_interval_ticks!r}: expected an integer ≥ 1"
+                f"config `decision_interval_ticks` = {self.decision_interval_ticks!r}: "
+                "expected an integer ≥ 1"
             )
 
     @classmethod

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import string
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -22,16 +22,18 @@ from gymnasium import spaces
 from drivehierarchy import _core
 from drivehierarchy._core import ConfigError
 from drivehierarchy.envs.config import R4Config
-from drivehierarchy.scenarios import resolve_scenario
+from drivehierarchy.scenarios import resolve_scenario, sumo_home
 
 STATE_FIELDS: tuple[str, ...] = tuple(_core.STATE_FIELDS)
 PROMPT_MAX_CHARS = 8192
+# Finite bounds for the state vector (metres, m/s, radians all stay far below this).
+STATE_BOUND = 1.0e6
 # Every character the prompt can contain (digits, letters, punctuation, space, newline).
 PROMPT_CHARSET = frozenset(string.printable)
 
 
 class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 4}
 
     def __init__(
         self,
@@ -62,7 +64,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
             obs["bev"] = spaces.Box(0, 255, (config.bev.size_px, config.bev.size_px, 3), np.uint8)
         if config.prompt:
             obs["prompt"] = spaces.Text(max_length=PROMPT_MAX_CHARS, min_length=0, charset=PROMPT_CHARSET)
-        obs["state"] = spaces.Box(-np.inf, np.inf, (len(STATE_FIELDS),), np.float32)
+        obs["state"] = spaces.Box(-STATE_BOUND, STATE_BOUND, (len(STATE_FIELDS),), np.float32)
         self.observation_space = spaces.Dict(obs)
         if config.action_mode == "decision":
             # [steer (negative = left), target_speed_mps]
@@ -72,7 +74,9 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         else:
             # [throttle, brake, steer]
             self.action_space = spaces.Box(
-                np.array([0.0, 0.0, -1.0], np.float32), np.array([1.0, 1.0, 1.0], np.float32), dtype=np.float32
+                np.array([0.0, 0.0, -1.0], np.float32),
+                np.array([1.0, 1.0, 1.0], np.float32),
+                dtype=np.float32,
             )
         self._last_frame: np.ndarray | None = None
 
@@ -81,7 +85,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         path = resolve_scenario(scenario)
         if self._sim is not None and path == self._scenario_path:
             return
-        self._sim = _core.Sim(path, self.config.to_json())
+        self._sim = _core.Sim(path, self.config.to_json(), sumo_home())
         self._scenario_path = path
 
     @property
@@ -103,7 +107,9 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         scenario = options.pop("scenario", None)
         if options:
             key = sorted(options)[0]
-            raise ConfigError(f"config `options.{key}` = {options[key]!r}: unknown reset option (known: scenario)")
+            raise ConfigError(
+                f"config `options.{key}` = {options[key]!r}: unknown reset option (known: scenario)"
+            )
         if scenario is not None:
             self._load(str(scenario))
         # The world seed comes from the env's np_random so seeding follows Gymnasium semantics.

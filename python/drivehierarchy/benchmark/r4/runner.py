@@ -140,6 +140,12 @@ def read_results(out: Path) -> dict[str, dict[str, Any]]:
 
 def _append_line(path: Path, record: dict[str, Any]) -> None:
     data = json.dumps(record, sort_keys=True) + "\n"
+    # A line torn by a kill is closed first (and then skipped as invalid JSON), never extended.
+    if path.exists() and path.stat().st_size > 0:
+        with path.open("rb") as fh:
+            fh.seek(-1, os.SEEK_END)
+            if fh.read(1) != b"\n":
+                data = "\n" + data
     with path.open("a", encoding="utf-8") as fh:
         fh.write(data)
         fh.flush()
@@ -288,7 +294,9 @@ def summarize(results: list[dict[str, Any]]) -> dict[str, Any]:
 def write_summary(out: Path, results: list[dict[str, Any]]) -> dict[str, Any]:
     summary = summarize(results)
     _write_json_atomic(out / "summary.json", summary)
-    rows = ["scenario,category,status,termination_reason,score_route,score_safety,score_efficiency,score_composed"]
+    rows = [
+        "scenario,category,status,termination_reason,score_route,score_safety,score_efficiency,score_composed"
+    ]
     for r in results:
         s = r["score"]
         rows.append(
