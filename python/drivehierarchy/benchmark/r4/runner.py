@@ -37,19 +37,6 @@ from drivehierarchy.agents.expert import ExpertAgent
 from drivehierarchy.envs.config import R4Config
 from drivehierarchy.scenarios import builtin_root
 
-CATEGORIES = (
-    "01_pedestrian",
-    "02_obstacles",
-    "03_turning",
-    "04_intersection",
-    "05_t_intersection",
-    "06_traffic_flow",
-    "07_sudden_brake",
-    "08_merging",
-    "09_yielding",
-    "10_roundabout",
-)
-
 
 class AgentRegistry:
     """Named agent factories; registering a name twice is an error."""
