@@ -16,7 +16,14 @@ def builtin_root() -> Path:
 
 def builtin_scenarios() -> list[Path]:
     """Every built-in R4 scenario file, in suite order (category, then name)."""
-    return sorted((builtin_root() / "r4").glob("*/*.toml"))
+    root = builtin_root() / "r4"
+    if not root.is_dir():
+        # The suite ships in the source tree (editable installs), not inside the wheel.
+        raise ScenarioError(
+            f"built-in scenarios not found at {root}: install from a checkout with `pip install -e .`, "
+            "or pass scenario files by path"
+        )
+    return sorted(root.glob("*/*.toml"))
 
 
 def scenario_id(path: Path) -> str:

@@ -35,7 +35,7 @@ from drivehierarchy._core import ConfigError
 from drivehierarchy.agents.base import Agent, ConstantAgent
 from drivehierarchy.agents.expert import ExpertAgent
 from drivehierarchy.envs.config import R4Config
-from drivehierarchy.scenarios import builtin_root
+from drivehierarchy.scenarios import builtin_scenarios
 
 
 class AgentRegistry:
@@ -98,7 +98,9 @@ def jobs_for(scenarios: Iterable[Path]) -> list[Job]:
 
 def suite_scenarios(suite: str) -> list[Path]:
     """`builtin` (the shipped suite), a folder of `*/*.toml`, or a single file."""
-    root = builtin_root() / "r4" if suite == "builtin" else Path(suite)
+    if suite == "builtin":
+        return builtin_scenarios()
+    root = Path(suite)
     if root.is_file():
         return [root]
     found = sorted(root.glob("*/*.toml")) + sorted(root.glob("*.toml"))
