@@ -119,7 +119,7 @@ def drive_to_mid_episode(scenario: str, decisions: int) -> tuple[Any, Any, int]:
         done += 1
         if term or trunc:
             break
-    return env, env.unwrapped.sim, done
+    return env, env.sim, done
 
 
 def in_view(sim: Any) -> int:

@@ -79,7 +79,7 @@ def render_start(scenario: Path, out: Path, *, seed: int = 0, extras: bool = Fal
     env = DriveHierarchyR4Env(scenario=scenario, front=None, bev=None, prompt=False)
     try:
         env.reset(seed=seed)
-        sim = env.unwrapped.sim
+        sim = env.sim
         files: dict[str, str] = {}
         front = CameraConfig(supersample=2)
         _save_png(sim.render_camera(json.dumps(dataclasses.asdict(front))), out / f"{key}_front.png")

@@ -226,7 +226,7 @@ def run_scene(job: Job, opts: RunOptions, out: Path) -> dict[str, Any]:
                 if key in obs:
                     Image.fromarray(obs[key]).save(frames_dir / f"{step:04d}_{key}.png")
         if gif is not None:
-            gif.push(env.unwrapped.sim.render_camera(VIDEO_CAMERA_JSON))
+            gif.push(env.sim.render_camera(VIDEO_CAMERA_JSON))
 
     t0 = time.perf_counter()
     try:
