@@ -6,16 +6,24 @@
 //! decision; target speed turned into throttle/brake by a P-law). So it is scored on the same
 //! routes and interface as the models it is compared with.
 //!
-//! * Lateral: pure pursuit from the rear axle (where the bicycle's velocity is along the heading,
-//!   so `tan δ = L κ` holds exactly) on the route, evaluated on the pose predicted half a hold
-//!   ahead; the command is kept inside the window from which the steer needed at each of the next
-//!   decisions is still reachable under the bridge's rate limit (pre-steering before curves).
+//! * Lateral: the base law is pure pursuit from the rear axle (where the bicycle's velocity is
+//!   along the heading, so `tan δ = L κ` holds exactly), evaluated on the pose predicted half a
+//!   hold ahead and kept inside the window from which the steer needed at each of the next
+//!   decisions stays reachable under the rate limit (pre-steering before curves). The command is
+//!   then chosen among the steers reachable from the last one by simulating the ego's bicycle
+//!   model under each, followed by the base law, and keeping the best-tracking one.
 //! * Longitudinal: the minimum of cruise, the speed limit, a curve-speed profile (lateral
-//!   acceleration and steer-rate bounds, braked into at a comfortable deceleration), stops before
-//!   actors predicted in the route corridor, stops before red / yellow lights, and a time-headway
-//!   law behind a lead vehicle.
+//!   acceleration and steer-rate bounds, braked into at a comfortable deceleration; no
+//!   acceleration while the wheel is still turned), stops before actors in or predicted into the
+//!   route corridor (unless the ego clears the spot well before they arrive), stops before red /
+//!   yellow lights on the route, and a time-headway law behind a lead vehicle.
+//! * Stall guard: the protocol ends an episode after 5 s below 1 km/h, so when held at rest by a
+//!   light or a standing actor the expert creeps a few centimetres every few seconds.
 //! * Optional local planner: with a drivable-area oracle, a static obstacle blocking the route is
-//!   passed by offsetting the pursuit path laterally into free drivable space.
+//!   passed by offsetting the pursuit path laterally into free same-direction drivable space.
+//!
+//! State: the expert assumes each [`Expert::act`] output reaches the bridge (one call per
+//! decision); [`Expert::reset`] at every episode start.
 
 use dh_env::geom::{wrap_angle, Polyline, Pose, Projection, Vec2};
 use dh_env::map::{LaneIdx, Network};
@@ -65,6 +73,9 @@ pub struct ExpertParams {
     pub light_stop_margin_m: f64,
     /// Yellow is run through when stopping would need more than this deceleration, m/s².
     pub yellow_max_decel_mps2: f64,
+    /// A red is run through only when stopping before its line would need more than this
+    /// deceleration (the light turned while the ego was committed), m/s².
+    pub red_commit_decel_mps2: f64,
     /// Time headway behind a lead vehicle, s.
     pub time_headway_s: f64,
     /// Actor motion is extrapolated (constant speed and heading) over this horizon, sampled at
@@ -89,6 +100,12 @@ pub struct ExpertParams {
     /// Local planner: lateral offsets tried (absolute values, m, ascending), ramp length per m/s
     /// of speed and its minimum, m.
     pub avoid_offsets_m: Vec<f64>,
+    /// Longest cluster of standing obstacles passed in one detour, m.
+    pub avoid_max_length_m: f64,
+    /// Gap kept behind a standing obstacle that may have to be passed (room for the ramp), m.
+    pub avoid_stop_gap_m: f64,
+    /// A vehicle seen standing this long (and not just before a signal) counts as parked, s.
+    pub parked_after_s: f64,
     pub avoid_ramp_per_mps: f64,
     pub avoid_ramp_min_m: f64,
 }
@@ -117,6 +134,7 @@ impl Default for ExpertParams {
             stop_gap_m: 3.5,
             light_stop_margin_m: 4.0,
             yellow_max_decel_mps2: 3.5,
+            red_commit_decel_mps2: 6.5,
             time_headway_s: 1.5,
             prediction_horizon_s: 3.0,
             prediction_step_s: 0.5,
@@ -127,6 +145,9 @@ impl Default for ExpertParams {
             creep_speed_mps: 0.8,
             creep_min_gap_m: 1.0,
             avoid_offsets_m: vec![1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0],
+            avoid_max_length_m: 40.0,
+            avoid_stop_gap_m: 11.0,
+            parked_after_s: 3.0,
             avoid_ramp_per_mps: 2.0,
             avoid_ramp_min_m: 10.0,
         }
@@ -150,7 +171,9 @@ impl ExpertParams {
             ("prediction_step_s", self.prediction_step_s),
             ("arrival_accel_mps2", self.arrival_accel_mps2),
             ("yellow_max_decel_mps2", self.yellow_max_decel_mps2),
+            ("red_commit_decel_mps2", self.red_commit_decel_mps2),
             ("avoid_ramp_min_m", self.avoid_ramp_min_m),
+            ("avoid_max_length_m", self.avoid_max_length_m),
         ];
         for (field, v) in positive {
             if !(v.is_finite() && v > 0.0) {
@@ -173,6 +196,8 @@ impl ExpertParams {
             ("creep_speed_mps", self.creep_speed_mps),
             ("creep_min_gap_m", self.creep_min_gap_m),
             ("avoid_ramp_per_mps", self.avoid_ramp_per_mps),
+            ("avoid_stop_gap_m", self.avoid_stop_gap_m),
+            ("parked_after_s", self.parked_after_s),
             ("rollout_heading_weight_m", self.rollout_heading_weight_m),
         ];
         for (field, v) in non_negative {
@@ -318,6 +343,8 @@ pub struct Expert {
     s_hint: Option<f64>,
     rest_time_s: f64,
     detour: Option<Detour>,
+    /// (actor id, seconds seen standing still), sorted by id.
+    stationary: Vec<(u32, f64)>,
     /// Allowed speed per metre ahead of `envelope_s0` (curves only), from the last decision.
     envelope: Vec<f64>,
     envelope_s0: f64,
@@ -368,7 +395,7 @@ fn project_window(route: &Polyline, p: Vec2, s_lo: f64, s_hi: f64) -> Option<Pro
             break;
         }
         let (t, d2) = dh_env::geom::closest_on_segment(p, pts[i], pts[i + 1]);
-        if best.map_or(true, |b| d2 < b.0) {
+        if best.is_none_or(|b| d2 < b.0) {
             best = Some((d2, i, t));
         }
     }
@@ -395,6 +422,7 @@ impl Expert {
             s_hint: None,
             rest_time_s: 0.0,
             detour: None,
+            stationary: Vec::new(),
             envelope: Vec::new(),
             envelope_s0: 0.0,
         })
@@ -410,6 +438,7 @@ impl Expert {
         self.s_hint = None;
         self.rest_time_s = 0.0;
         self.detour = None;
+        self.stationary.clear();
         self.envelope.clear();
     }
 
@@ -431,7 +460,14 @@ impl Expert {
         // extend the route straight on at both ends so projections there stay meaningful
         // (arc lengths below are on the extended route).
         let ext = extend_route(input.route);
-        let input = &ExpertInput { route: &ext, ..*input };
+        // A malformed ego size falls back to a passenger car's so every length below is finite.
+        let mut ego_fixed = *ego;
+        if !(ego.length_m.is_finite() && ego.length_m > 0.0 && ego.width_m.is_finite() && ego.width_m > 0.0) {
+            ego_fixed.length_m = 4.9;
+            ego_fixed.width_m = 2.0;
+        }
+        let ego = &ego_fixed;
+        let input = &ExpertInput { route: &ext, ego, ..*input };
         let route = input.route;
         let v = ego.speed_mps.max(0.0);
         let s_ego = self.progress(route, ego.pose.pos, v);
@@ -441,6 +477,7 @@ impl Expert {
         } else {
             self.rest_time_s = 0.0;
         }
+        self.observe_actors(input.actors);
         if self.detour.is_some_and(|d| s_ego - ego.length_m > d.s3) {
             self.detour = None;
         }
@@ -450,7 +487,7 @@ impl Expert {
         self.last_steer = steer;
         ExpertAction {
             steer,
-            target_speed_mps: target.clamp(0.0, 30.0),
+            target_speed_mps: if target.is_finite() { target.clamp(0.0, 30.0) } else { 0.0 },
             reason,
             path_offset_m: self.detour.map_or(0.0, |d| d.offset_at(s_ego)),
         }
@@ -761,6 +798,13 @@ impl Expert {
                 if need > p.yellow_max_decel_mps2 {
                     continue;
                 }
+            } else {
+                // A red that appears when even hard braking cannot stop the front before the
+                // line (after yellow was run through): clear the junction rather than stop in it.
+                let reach = (d_line - v * p.decision_period_s).max(0.05);
+                if v * v / (2.0 * reach) > p.red_commit_decel_mps2 {
+                    continue;
+                }
             }
             out.push(StopPoint {
                 s_stop: pr.s - p.light_stop_margin_m,
@@ -889,8 +933,16 @@ impl Expert {
                     if k == 0 && !moving {
                         blocking_static.push((s_hit, a));
                     }
+                    // Something that may have to be passed: stop far enough back to leave room
+                    // for the detour ramp.
+                    let passable = input.drivable.is_some()
+                        && k == 0
+                        && !moving
+                        && a.kind != ActorKind::Pedestrian
+                        && !self.light_near(input, s_hit);
+                    let gap = if passable { p.stop_gap_m.max(p.avoid_stop_gap_m) } else { p.stop_gap_m };
                     out.push(StopPoint {
-                        s_stop: s_hit - p.stop_gap_m,
+                        s_stop: s_hit - gap,
                         v_at: 0.0,
                         reason: SpeedReason::Obstacle { actor_id: a.id },
                         creep_limit: (k == 0 && !moving).then(|| {
@@ -907,8 +959,8 @@ impl Expert {
             if self.detour.is_none() {
                 if let Some(&(s_hit, _)) = blocking_static
                     .iter()
-                    // Only true obstacles: a stopped vehicle may be queuing and is waited for.
-                    .filter(|(_, a)| a.kind.is_static())
+                    // Static objects, and vehicles that look parked (see `is_parked`).
+                    .filter(|(s, a)| a.kind.is_static() || self.is_parked(input, a, *s))
                     .min_by(|x, y| x.0.total_cmp(&y.0))
                 {
                     if s_hit - s_front < 40.0 + v * 3.0 {
@@ -921,6 +973,42 @@ impl Expert {
             }
         }
         out
+    }
+
+    /// A signal head on the route within 5 m before to 40 m after arc `s` (a standing vehicle
+    /// there may be queuing for it).
+    fn light_near(&self, input: &ExpertInput<'_>, s: f64) -> bool {
+        input.lights.iter().any(|l| {
+            l.stop_line.pos.is_finite()
+                && project_window(input.route, l.stop_line.pos, s - 5.0, s + 40.0)
+                    .is_some_and(|pr| pr.distance < 2.0 && pr.s > s - 5.0 + 1e-6 && pr.s < s + 40.0 - 1e-6)
+        })
+    }
+
+    /// A vehicle standing still for `parked_after_s` of the expert's observation, with no
+    /// signal head just beyond it, is treated as parked (passable like a static object).
+    fn is_parked(&self, input: &ExpertInput<'_>, a: &ActorView, s_hit: f64) -> bool {
+        !a.kind.is_static()
+            && a.kind != ActorKind::Pedestrian
+            && self.stationary_s(a.id) >= self.params.parked_after_s
+            && !self.light_near(input, s_hit)
+    }
+
+    fn stationary_s(&self, id: u32) -> f64 {
+        self.stationary.binary_search_by_key(&id, |e| e.0).map_or(0.0, |i| self.stationary[i].1)
+    }
+
+    /// Updates how long each actor has been seen standing still (ids sorted, deterministic).
+    fn observe_actors(&mut self, actors: &[ActorView]) {
+        let dt = self.params.decision_period_s;
+        let mut next: Vec<(u32, f64)> = actors
+            .iter()
+            .filter(|a| a.speed_mps.is_finite() && a.speed_mps.abs() < 0.1)
+            .map(|a| (a.id, self.stationary_s(a.id) + dt))
+            .collect();
+        next.sort_by_key(|e| e.0);
+        next.dedup_by_key(|e| e.0);
+        self.stationary = next;
     }
 
     /// With a detour in force, obstacles off the shifted corridor no longer constrain speed.
@@ -972,29 +1060,36 @@ impl Expert {
         let ego = input.ego;
         let half_ego = ego.width_m * 0.5 + p.corridor_margin_m;
         // Extent of the blocking cluster along the route (obstacles close together pass as one).
-        let mut s_end = s_hit;
-        let mut s_start = s_hit;
-        for a in input.actors.iter().filter(|a| a.speed_mps.abs() < 0.05) {
-            if let Some(sh) =
-                self.corridor_hit(route, &a.footprint().corners(), s_ego - 5.0, s_hit + 60.0, half_ego + 4.0)
-            {
-                if sh <= s_end + 10.0 && sh >= s_hit - 1.0 {
-                    let far = a
-                        .footprint()
-                        .corners()
-                        .iter()
-                        .filter_map(|c| project_window(route, *c, sh - 5.0, sh + 30.0))
-                        .map(|pr| pr.s)
-                        .fold(sh, f64::max);
-                    s_end = s_end.max(far);
-                    s_start = s_start.min(sh);
-                }
+        let mut spans: Vec<(f64, f64)> = input
+            .actors
+            .iter()
+            .filter(|a| a.speed_mps.abs() < 0.05)
+            .filter_map(|a| {
+                let corners = a.footprint().corners();
+                let sh = self.corridor_hit(route, &corners, s_ego - 5.0, s_hit + 60.0, half_ego + 4.0)?;
+                let far = corners
+                    .iter()
+                    .filter_map(|c| project_window(route, *c, sh - 5.0, sh + 30.0))
+                    .map(|pr| pr.s)
+                    .fold(sh, f64::max);
+                (sh >= s_hit - 1.0).then_some((sh, far))
+            })
+            .collect();
+        spans.sort_by(|x, y| x.0.total_cmp(&y.0));
+        let (s_start, mut s_end) = (s_hit, s_hit);
+        for (sh, far) in spans {
+            if sh <= s_end + 10.0 {
+                s_end = s_end.max(far);
             }
         }
+        if s_end - s_start > p.avoid_max_length_m {
+            return None; // a long line of standing things (a queue?): wait instead
+        }
         let ramp = (p.avoid_ramp_per_mps * v.max(4.0)).max(p.avoid_ramp_min_m);
-        let s1 = s_start - p.stop_gap_m.max(2.0) - ego.length_m * 0.5;
+        // The offset must be reached when the front is 1 m short of the first obstacle.
+        let s1 = s_start - ego.length_m * 0.5 - 1.0;
         let s0 = (s1 - ramp).max(s_ego);
-        if s1 - s0 < 0.5 * p.avoid_ramp_min_m {
+        if s1 - s0 < 0.8 * p.avoid_ramp_min_m {
             return None;
         }
         let s2 = s_end + ego.length_m * 0.5 + 2.0;
@@ -1020,6 +1115,19 @@ impl Expert {
         let margin = self.params.corridor_margin_m;
         let half_w = input.ego.width_m * 0.5;
         let half_l = input.ego.length_m * 0.5;
+        // Moving traffic in the lane the detour uses (from 50 m behind its start to 30 m past
+        // its end): wait for a gap.
+        for a in input.actors.iter().filter(|a| a.speed_mps.abs() > 0.2) {
+            if let Some(pr) = project_window(route, a.pose.pos, d.s0 - 50.0, d.s3 + 30.0) {
+                // Traffic already ahead and driving on along the route leaves the gap; the lead
+                // law follows it if the ego catches up.
+                let along = a.speed_mps * wrap_angle(a.pose.yaw - route_heading(route, pr.s)).cos();
+                let leaving = pr.s > d.s0 + input.ego.length_m && along > 3.0;
+                if !leaving && (pr.lateral - d.offset).abs() < half_w + 0.5 * a.width_m + 1.0 {
+                    return false;
+                }
+            }
+        }
         let mut s = d.s0;
         while s <= d.s3 {
             let o = d.offset_at(s);

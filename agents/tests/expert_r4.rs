@@ -5,10 +5,13 @@
 //! `sumo:` maps need SUMO_HOME (the env var, else `python3 -c "import sumo"`); scenarios on them
 //! are skipped with a message when it is absent.
 
-use dh_agents::expert::{Expert, ExpertParams, SpeedReason};
+use dh_agents::expert::{
+    network_drivable, network_speed_limit, Expert, ExpertInput, ExpertParams, SpeedReason,
+};
 use dh_env::drive::bridge::{ActuationBridge, Decision};
 use dh_env::scenario::{LoadOptions, ResolvedScenario, Scenario};
 use dh_env::score::{Contact, RunInfo, ScoreParams, ScoreTracker, TerminationReason, TickInput};
+use dh_env::view::LightColor;
 use dh_env::world::{Control, World};
 use dh_env::DECISION_INTERVAL_TICKS;
 use std::path::{Path, PathBuf};
@@ -18,16 +21,7 @@ fn repo_root() -> PathBuf {
 }
 
 fn sumo_home() -> Option<PathBuf> {
-    if let Some(h) = std::env::var_os("SUMO_HOME") {
-        return Some(PathBuf::from(h));
-    }
-    let out = std::process::Command::new("python3")
-        .args(["-c", "import sumo; print(sumo.SUMO_HOME)"])
-        .output()
-        .ok()?;
-    let s = String::from_utf8(out.stdout).ok()?;
-    let p = PathBuf::from(s.trim());
-    (out.status.success() && p.is_dir()).then_some(p)
+    dh_env::scenario::discover_sumo_home()
 }
 
 fn scenario_files() -> Vec<PathBuf> {
@@ -177,4 +171,75 @@ fn expert_scores_at_least_90_on_every_project_scenario() {
     if n == 0 {
         eprintln!("skipping: no scenarios under scenarios/r4");
     }
+}
+
+/// With every signal head forced to red in what the expert sees, it must stop before the stop
+/// line on its route at the signalised crossing and wait there, creeping just enough never to
+/// trip the blocked timeout, for a minute.
+#[test]
+fn forced_red_at_the_signalised_crossing_holds_the_ego() {
+    let f = repo_root().join("scenarios/r4/03_turning/town01_right_turn_signalised.toml");
+    if !f.exists() {
+        eprintln!("skipping: {} not found", f.display());
+        return;
+    }
+    let s = Scenario::load(&f).unwrap();
+    let mut world = World::new(&s, s.seed).unwrap();
+    let mut bridge = ActuationBridge::new();
+    let mut expert = Expert::new(ExpertParams::default()).unwrap();
+    let route = &s.ego.route;
+    let net = world.map().clone();
+    let oracle = network_drivable(&net);
+    // Stop lines of heads controlling the route (within 1.5 m of it, same direction).
+    let lines: Vec<f64> = world
+        .lights()
+        .iter()
+        .filter_map(|l| {
+            let q = route.project(l.stop_line.pos)?;
+            (q.distance < 1.5 && (route.heading_at(q.s) - l.stop_line.yaw).cos() > 0.8).then_some(q.s)
+        })
+        .collect();
+    assert!(!lines.is_empty(), "no signal head on the route");
+    let line = lines.iter().copied().fold(f64::INFINITY, f64::min);
+    let half_len = world.ego().length_m * 0.5;
+    let (mut control, mut still, mut max_still, mut max_front) =
+        (Control::default(), 0u32, 0u32, f64::NEG_INFINITY);
+    let mut light_decisions = 0;
+    while world.time_s() < 60.0 {
+        if world.tick_count() % DECISION_INTERVAL_TICKS as u64 == 0 {
+            let ego = *world.ego();
+            let mut lights = world.lights().to_vec();
+            for l in &mut lights {
+                l.color = LightColor::Red;
+            }
+            let input = ExpertInput {
+                ego: &ego,
+                route,
+                actors: world.actors(),
+                lights: &lights,
+                speed_limit_mps: network_speed_limit(&net, ego.pose.pos),
+                drivable: Some(&oracle),
+            };
+            let a = expert.act(&input);
+            light_decisions += u32::from(a.reason == SpeedReason::Light);
+            let c = bridge.apply(Some(Decision::from(a)), ego.speed_mps);
+            control = Control { throttle: c.throttle, brake: c.brake, steer: c.steer };
+        }
+        let r = world.tick(&control).unwrap();
+        assert!(r.contacts.is_empty(), "contact at t = {:.1}", r.time_s);
+        assert!(r.on_road, "off road at t = {:.1}", r.time_s);
+        let front = route.project(r.ego.pose.pos).unwrap().s + half_len;
+        max_front = max_front.max(front);
+        still = if r.ego.speed_mps < 1.0 / 3.6 { still + 1 } else { 0 };
+        max_still = max_still.max(still);
+    }
+    println!(
+        "forced red: front stopped {:.2} m before the line, longest rest {} ticks",
+        line - max_front,
+        max_still
+    );
+    assert!(max_front < line, "front passed the stop line by {:.2} m", max_front - line);
+    assert!(line - max_front < 5.0, "stopped {:.1} m short of the line", line - max_front);
+    assert!(max_still <= 100, "at rest for {max_still} ticks: blocked timeout");
+    assert!(light_decisions > 100);
 }

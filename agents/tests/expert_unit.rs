@@ -143,6 +143,14 @@ fn red_light_stops_and_green_goes() {
         &[light(Vec2::new(30.0, 0.0), 0.0, LightColor::Yellow)],
     );
     assert_ne!(yellow_close.reason, SpeedReason::Light);
+    // Red appearing with the front 3 m from the line at 12 m/s: cannot stop before it, go on.
+    let committed = decide(
+        &route,
+        &ego_at(Vec2::new(24.7, 0.0), 0.0, 12.0),
+        &[],
+        &[light(Vec2::new(30.0, 0.0), 0.0, LightColor::Red)],
+    );
+    assert_ne!(committed.reason, SpeedReason::Light);
     let yellow_far = decide(&route, &ego, &[], &[light(Vec2::new(30.0, 0.0), 0.0, LightColor::Yellow)]);
     assert_eq!(yellow_far.reason, SpeedReason::Light);
 }
@@ -170,6 +178,16 @@ fn degenerate_input_stops_without_panicking() {
     assert_eq!((a.target_speed_mps, a.reason), (0.0, SpeedReason::NoRoute));
     let nan = ego_at(Vec2::new(f64::NAN, 0.0), 0.0, 3.0);
     assert_eq!(decide(&straight(), &nan, &[], &[]).reason, SpeedReason::NoRoute);
+    // Non-finite sizes, actors and lights are tolerated.
+    let mut odd = ego_at(Vec2::new(10.0, 0.0), 0.0, 5.0);
+    odd.length_m = f64::NAN;
+    let nan_actor = actor(9, ActorKind::Car, Vec2::new(f64::NAN, 0.0), 0.0, 1.0, 4.0, 2.0);
+    let nan_light = light(Vec2::new(f64::INFINITY, 0.0), 0.0, LightColor::Red);
+    let a = decide(&straight(), &odd, &[nan_actor], &[nan_light]);
+    assert!(
+        a.steer.is_finite() && a.target_speed_mps.is_finite() && a.reason == SpeedReason::Cruise,
+        "{a:?}"
+    );
     let bad = ExpertParams { cruise_speed_mps: f64::NAN, ..ExpertParams::default() };
     let err = Expert::new(bad).unwrap_err().to_string();
     assert!(err.contains("cruise_speed_mps"), "{err}");

@@ -169,7 +169,7 @@ fn choice_hint(s: &[char]) -> Option<char> {
         }
         i = skip_space(s, i);
         let Some(&c) = s.get(i) else { continue };
-        if c.is_ascii_uppercase() && s.get(i + 1).map_or(true, |n| !pu::is_word(*n)) {
+        if c.is_ascii_uppercase() && s.get(i + 1).is_none_or(|n| !pu::is_word(*n)) {
             return Some(c);
         }
     }
@@ -334,7 +334,7 @@ fn standalone_capitals(text: &str) -> Vec<PyValue> {
     for (i, &c) in s.iter().enumerate() {
         if c.is_ascii_uppercase()
             && (i == 0 || !pu::is_word(s[i - 1]))
-            && s.get(i + 1).map_or(true, |n| !pu::is_word(*n))
+            && s.get(i + 1).is_none_or(|n| !pu::is_word(*n))
         {
             out.push(PyValue::Str(c.to_string()));
         }

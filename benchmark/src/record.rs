@@ -110,7 +110,7 @@ fn images_of(task: TaskId, record: &Value, ctx: &str) -> Result<Vec<ImageRef>> {
     }
     let list = record
         .get("image_paths")
-        .filter(|v| !matches!(v, Value::Null) && v.as_array().map_or(true, |a| !a.is_empty()))
+        .filter(|v| !matches!(v, Value::Null) && v.as_array().is_none_or(|a| !a.is_empty()))
         .or_else(|| record.get("meta_data").and_then(|m| m.get("image_paths")));
     if let Some(list) = list.filter(|v| !v.is_null()) {
         let items =

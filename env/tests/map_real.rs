@@ -16,21 +16,8 @@ fn tongji_path() -> PathBuf {
     )
 }
 
-/// `$SUMO_HOME`, or the one the eclipse-sumo Python package reports.
 fn sumo_home() -> Option<PathBuf> {
-    if let Some(h) = std::env::var_os("SUMO_HOME") {
-        return Some(PathBuf::from(h));
-    }
-    let out = std::process::Command::new("python3")
-        .args(["-c", "import sumo; print(sumo.SUMO_HOME)"])
-        .output()
-        .ok()?;
-    if !out.status.success() {
-        return None;
-    }
-    let s = String::from_utf8(out.stdout).ok()?;
-    let p = PathBuf::from(s.trim());
-    p.is_dir().then_some(p)
+    dh_env::scenario::discover_sumo_home()
 }
 
 fn load_or_skip(path: &Path) -> Option<Network> {

@@ -21,16 +21,7 @@ fn repo_root() -> PathBuf {
 }
 
 fn sumo_home() -> Option<PathBuf> {
-    if let Some(h) = std::env::var_os("SUMO_HOME") {
-        return Some(PathBuf::from(h));
-    }
-    let out = std::process::Command::new("python3")
-        .args(["-c", "import sumo; print(sumo.SUMO_HOME)"])
-        .output()
-        .ok()?;
-    let s = String::from_utf8(out.stdout).ok()?;
-    let p = PathBuf::from(s.trim());
-    (out.status.success() && p.is_dir()).then_some(p)
+    dh_env::scenario::discover_sumo_home()
 }
 
 fn scenario_files() -> Vec<PathBuf> {

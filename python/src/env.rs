@@ -70,6 +70,9 @@ impl PySim {
         let inner = &mut self.inner;
         let (obs, info) = py.detach(|| inner.reset(seed)).map_err(|e| err(py, e))?;
         self.expert.reset();
+        if let Ok(world) = self.inner.world() {
+            self.expert.set_vehicle(world.vehicle_params());
+        }
         self.expert_bridge.reset();
         Ok((obs_to_py(py, obs)?, info_to_py(py, &info)?))
     }

@@ -235,13 +235,28 @@ impl MapCache {
     }
 }
 
+/// `SUMO_HOME` from the environment, else the one the installed `eclipse-sumo` Python package
+/// reports (`python3 -c "import sumo; print(sumo.SUMO_HOME)"`); `None` when neither exists.
+pub fn discover_sumo_home() -> Option<PathBuf> {
+    if let Some(h) = std::env::var_os("SUMO_HOME") {
+        return Some(PathBuf::from(h));
+    }
+    let out = std::process::Command::new("python3")
+        .args(["-c", "import sumo; print(sumo.SUMO_HOME)"])
+        .output()
+        .ok()?;
+    let s = String::from_utf8(out.stdout).ok()?;
+    let p = PathBuf::from(s.trim());
+    (out.status.success() && p.is_dir()).then_some(p)
+}
+
 /// Resolves the `map` value of a scenario file to a path.
 pub fn resolve_map_path(file: &Path, map: &str, sumo_home: Option<&Path>) -> Result<PathBuf> {
     if let Some(rest) = map.strip_prefix(SUMO_PREFIX) {
         let home = match sumo_home {
             Some(h) => h.to_path_buf(),
-            None => std::env::var_os("SUMO_HOME").map(PathBuf::from).ok_or_else(|| {
-                Error::scenario(file, "map", map, "a `sumo:` map needs SUMO_HOME (set the SUMO_HOME environment variable or pass sumo_home; the Python layer uses `sumo.SUMO_HOME` of the eclipse-sumo package)")
+            None => discover_sumo_home().ok_or_else(|| {
+                Error::scenario(file, "map", map, "a `sumo:` map needs SUMO_HOME (set the SUMO_HOME environment variable, pass sumo_home, or `pip install eclipse-sumo`)")
             })?,
         };
         let p = home.join(rest.trim_start_matches('/'));

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from drivehierarchy.benchmark.r4 import runner
@@ -47,7 +48,7 @@ def _opts(args: argparse.Namespace) -> runner.RunOptions:
 
 def _run(args: argparse.Namespace) -> int:
     path = Path(resolve_scenario(args.scenario))
-    results = runner.evaluate([path], args.out, _opts(args))
+    results = runner.evaluate([path], args.out, _opts(args), log=lambda m: print(m, file=sys.stderr))
     print(json.dumps(results[0]["score"], indent=2, sort_keys=True))
     return 0
 

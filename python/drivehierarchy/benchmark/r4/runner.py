@@ -38,19 +38,6 @@ from drivehierarchy.agents.expert import ExpertAgent
 from drivehierarchy.envs.config import CameraConfig, R4Config
 from drivehierarchy.scenarios import builtin_root
 
-CATEGORIES = (
-    "01_pedestrian",
-    "02_obstacles",
-    "03_turning",
-    "04_intersection",
-    "05_t_intersection",
-    "06_traffic_flow",
-    "07_sudden_brake",
-    "08_merging",
-    "09_yielding",
-    "10_roundabout",
-)
-
 
 class AgentRegistry:
     """Named agent factories; registering a name twice is an error."""
@@ -144,6 +131,12 @@ def read_results(out: Path) -> dict[str, dict[str, Any]]:
 
 def _append_line(path: Path, record: dict[str, Any]) -> None:
     data = json.dumps(record, sort_keys=True) + "\n"
+    # A line torn by a kill is closed first (and then skipped as invalid JSON), never extended.
+    if path.exists() and path.stat().st_size > 0:
+        with path.open("rb") as fh:
+            fh.seek(-1, os.SEEK_END)
+            if fh.read(1) != b"\n":
+                data = "\n" + data
     with path.open("a", encoding="utf-8") as fh:
         fh.write(data)
         fh.flush()

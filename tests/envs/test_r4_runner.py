@@ -1,0 +1,104 @@
+"""R4 evaluation runner and CLI: results, resume after a crash, re-scoring, scenario validation."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from drivehierarchy import ConfigError
+from drivehierarchy.benchmark.r4 import runner
+from drivehierarchy.cli import main
+from drivehierarchy.scenarios import builtin_root, builtin_scenarios
+
+TWO = [builtin_root() / "r4" / "01_pedestrian", builtin_root() / "r4" / "07_sudden_brake"]
+
+
+def two_scenarios() -> list[Path]:
+    return [p for d in TWO for p in sorted(d.glob("*.toml"))]
+
+
+def test_evaluate_writes_records_logs_and_summary(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    results = runner.evaluate(two_scenarios(), out, runner.RunOptions(agent="expert"), log=lambda _: None)
+    assert [r["category"] for r in results] == ["01_pedestrian", "07_sudden_brake"]
+    for r in results:
+        scene = out / "scenes" / r["key"]
+        record = json.loads((scene / "scene_score.json").read_text())
+        assert record["score_composed"] >= 90.0
+        assert (scene / "episode_log.json").stat().st_size > 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["r4_score"] == pytest.approx(
+        sum(r["score"]["score_composed"] for r in results) / 2
+    )
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["agent"] == "expert" and len(manifest["scenarios"]) == 2
+    assert all(len(v["sha256"]) == 64 for v in manifest["scenarios"].values())
+    assert "| **R4 (mean of categories)** |" in (out / "summary.md").read_text()
+
+
+def test_resume_skips_finished_scenarios_and_redoes_a_torn_one(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    opts = runner.RunOptions(agent="expert")
+    first = runner.evaluate(two_scenarios(), out, opts, log=lambda _: None)
+    results = out / "results.jsonl"
+    lines = results.read_text().splitlines(keepends=True)
+    # Simulate a kill in the middle of writing the second line.
+    results.write_text(lines[0] + lines[1][: len(lines[1]) // 2])
+    logged: list[str] = []
+    again = runner.evaluate(two_scenarios(), out, opts, log=logged.append)
+    assert "done before, skipped" in logged[0]
+    assert "S_R4" in logged[1]
+    assert [r["score"]["score_composed"] for r in again] == [r["score"]["score_composed"] for r in first]
+    # The torn tail is kept (append-only) and the redone scenario is appended after it.
+    assert len(runner.read_results(out)) == 2
+
+
+def test_an_output_dir_of_another_agent_is_refused(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    runner.evaluate(two_scenarios()[:1], out, runner.RunOptions(agent="expert"), log=lambda _: None)
+    with pytest.raises(ConfigError, match="another run"):
+        runner.evaluate(two_scenarios()[:1], out, runner.RunOptions(agent="zero"), log=lambda _: None)
+
+
+def test_rescore_command_reproduces_the_recorded_scores(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / "run"
+    results = runner.evaluate(two_scenarios(), out, runner.RunOptions(agent="expert"), log=lambda _: None)
+    assert main(["r4", "rescore", str(out)]) == 0
+    for r in results:
+        rescored = json.loads((out / "scenes" / r["key"] / "scene_score.rescored.json").read_text())
+        for key in ("score_composed", "score_route", "score_safety", "score_efficiency", "events"):
+            assert rescored[key] == r["score"][key]
+    assert "S_R4" in capsys.readouterr().out
+
+
+def test_unknown_agent_is_a_config_error(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="unknown agent"):
+        runner.evaluate(two_scenarios()[:1], tmp_path, runner.RunOptions(agent="nobody"), log=lambda _: None)
+
+
+def test_cli_run_writes_frames(tmp_path: Path) -> None:
+    out = tmp_path / "one"
+    proc = subprocess.run(
+        [sys.executable, "-m", "drivehierarchy.cli", "r4", "run", "--agent", "expert",
+         "--scenario", "01_pedestrian/town01_midblock_crossing", "--out", str(out), "--frames"],
+        capture_output=True, text=True, timeout=300, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    record = json.loads(proc.stdout)
+    assert record["termination_reason"] == "destination_reached"
+    frames = sorted((out / "scenes").glob("*/frames/*_front.png"))
+    assert len(frames) == record["decisions"]
+
+
+def test_scenario_validate_command(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    files = [str(p) for p in builtin_scenarios()]
+    assert main(["scenario", "validate", *files]) == 0
+    assert capsys.readouterr().out.count("ok ") == len(files)
+    bad = tmp_path / "bad.toml"
+    bad.write_text('version = 1\nid = "x"\n', encoding="utf-8")
+    assert main(["scenario", "validate", str(bad)]) == 1
+    assert "INVALID" in capsys.readouterr().out
