@@ -44,10 +44,7 @@ def ours_stepper(images: bool, expert: bool) -> Callable[[], int]:
     state = {"tick": 0}
 
     def body() -> int:
-        if expert:
-            action = env.expert_action()
-        else:
-            action = np.array([rng.uniform(-0.05, 0.05), 8.0], np.float32)
+        action = env.expert_action() if expert else np.array([rng.uniform(-0.05, 0.05), 8.0], np.float32)
         _, _, terminated, truncated, info = env.step(action)
         done = info["tick"] - state["tick"]
         state["tick"] = info["tick"]
@@ -99,7 +96,8 @@ def main() -> None:
     peer_rate = None
     if peer is not None:
         peer_rate = measure(args.seconds, peer)
-        rows.append(("highway-env intersection-v0 (Kinematics obs)", "decisions/s", peer_rate[0], peer_rate[1]))
+        name = "highway-env intersection-v0 (Kinematics obs)"
+        rows.append((name, "decisions/s", peer_rate[0], peer_rate[1]))
 
     print(f"{'what':58s} {'unit':12s} {'wall':>10s} {'cpu':>10s}")
     for name, unit, wall, cpu in rows:

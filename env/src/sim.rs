@@ -21,7 +21,7 @@ use crate::{Error, Result, DECISION_INTERVAL_TICKS};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 use std::path::Path;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
 /// How actions are read.
@@ -209,7 +209,9 @@ pub struct Sim {
     scenario: ResolvedScenario,
     config: SimConfig,
     params: ScoreParams,
-    render_map: Option<Arc<RenderMap>>,
+    /// Built at load when observations carry images, else on the first render call (then kept:
+    /// rebuilding it per call costs milliseconds on a city net).
+    render_map: OnceLock<Arc<RenderMap>>,
     tracker: RouteTracker,
     /// (arc length on the route, index into the world's light views) of the route's signal heads.
     route_lights: Vec<(f64, usize)>,
@@ -242,11 +244,10 @@ impl Sim {
 
     pub fn from_scenario(scenario: ResolvedScenario, config: SimConfig) -> Result<Sim> {
         config.validate()?;
-        let render_map = if config.front.is_some() || config.bev.is_some() {
-            Some(Arc::new(RenderMap::build(&scenario.map)))
-        } else {
-            None
-        };
+        let render_map = OnceLock::new();
+        if config.front.is_some() || config.bev.is_some() {
+            let _ = render_map.set(Arc::new(RenderMap::build(&scenario.map)));
+        }
         let tracker = RouteTracker::new(scenario.ego.route.clone());
         Ok(Sim {
             scenario,
@@ -485,10 +486,7 @@ impl Sim {
     }
 
     fn render_map_or_build(&self) -> Arc<RenderMap> {
-        match &self.render_map {
-            Some(m) => m.clone(),
-            None => Arc::new(RenderMap::build(&self.scenario.map)),
-        }
+        self.render_map.get_or_init(|| Arc::new(RenderMap::build(&self.scenario.map))).clone()
     }
 
     /// The protocol's 8 future route points in the world frame (drawn on the BEV).

@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
+
 from drivehierarchy.benchmark.openloop.catalog import ImageRootMap, default_catalog, load_dataset
 from drivehierarchy.benchmark.openloop.finetune import sft_sample, target_text
 from drivehierarchy.benchmark.openloop.prompts import system_prompt

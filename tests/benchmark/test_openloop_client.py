@@ -12,6 +12,7 @@ import urllib.request
 from pathlib import Path
 
 import pytest
+
 from drivehierarchy import ConfigError
 from drivehierarchy.benchmark.openloop.client import (
     ChatClient,

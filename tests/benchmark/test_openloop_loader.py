@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
+
 from drivehierarchy import ConfigError
 from drivehierarchy.benchmark.openloop.catalog import (
     ImageRootMap,

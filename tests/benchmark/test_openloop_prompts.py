@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+
 from drivehierarchy.benchmark.openloop.catalog import default_catalog, load_dataset, select_datasets
 from drivehierarchy.benchmark.openloop.prompts import (
     build_messages,

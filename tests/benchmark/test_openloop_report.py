@@ -11,6 +11,7 @@ import json
 from pathlib import Path
 
 import pytest
+
 from drivehierarchy import ConfigError
 from drivehierarchy.benchmark.openloop.finetune import deficit_table, select_targets
 from drivehierarchy.benchmark.openloop.records import TASK_IDS

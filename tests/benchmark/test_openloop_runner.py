@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+
 from drivehierarchy import ConfigError
 from drivehierarchy.benchmark.openloop.catalog import ImageRootMap, default_catalog, load_dataset
 from drivehierarchy.benchmark.openloop.client import DecodingConfig

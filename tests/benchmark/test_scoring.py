@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+
 from drivehierarchy import ConfigError, _core
 from drivehierarchy.benchmark.openloop.scoring import PredictionFileWarning, score_run
 

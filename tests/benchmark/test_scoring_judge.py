@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+
 from drivehierarchy.benchmark.openloop import judge as judge_mod
 from drivehierarchy.benchmark.openloop.judge import JudgeResult, JudgeSkipped, judge_input, run_judge
 from drivehierarchy.benchmark.openloop.scoring import score_run

@@ -249,9 +249,9 @@ def test_unknown_settings_and_options_are_rejected() -> None:
     with pytest.raises(ConfigError, match="colour"):
         make(colour="red")
     env = make(**NO_IMAGES)
-    with pytest.raises(ConfigError, match="options.level"):
+    with pytest.raises(ConfigError, match=r"options\.level"):
         env.reset(options={"level": 3})
-    with pytest.raises(ScenarioError, match="not a file and not a built-in"):
+    with pytest.raises(ScenarioError, match=r"not a file and not a built-in"):
         env.reset(options={"scenario": "99_nowhere/none"})
 
 

@@ -31,9 +31,7 @@ def test_evaluate_writes_records_logs_and_summary(tmp_path: Path) -> None:
         assert record["score_composed"] >= 90.0
         assert (scene / "episode_log.json").stat().st_size > 0
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["r4_score"] == pytest.approx(
-        sum(r["score"]["score_composed"] for r in results) / 2
-    )
+    assert summary["r4_score"] == pytest.approx(sum(r["score"]["score_composed"] for r in results) / 2)
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["agent"] == "expert" and len(manifest["scenarios"]) == 2
     assert all(len(v["sha256"]) == 64 for v in manifest["scenarios"].values())
@@ -64,7 +62,9 @@ def test_an_output_dir_of_another_agent_is_refused(tmp_path: Path) -> None:
         runner.evaluate(two_scenarios()[:1], out, runner.RunOptions(agent="zero"), log=lambda _: None)
 
 
-def test_rescore_command_reproduces_the_recorded_scores(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_rescore_command_reproduces_the_recorded_scores(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
     out = tmp_path / "run"
     results = runner.evaluate(two_scenarios(), out, runner.RunOptions(agent="expert"), log=lambda _: None)
     assert main(["r4", "rescore", str(out)]) == 0

@@ -36,6 +36,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     rs.add_argument("dir", type=Path)
     rs.set_defaults(func=_rescore)
 
+    gal = cmds.add_parser("gallery", help="rewrite the rendering gallery (start frame of every scenario)")
+    gal.add_argument("--out", type=Path, default=Path("docs/gallery"), help="output directory")
+    gal.add_argument("--seed", type=int, default=0)
+    gal.set_defaults(func=_gallery)
+
 
 def _opts(args: argparse.Namespace) -> runner.RunOptions:
     return runner.RunOptions(agent=args.agent, seed=args.seed, frames=args.frames, video=args.video)
@@ -59,4 +64,12 @@ def _rescore(args: argparse.Namespace) -> int:
     for r in runner.rescore_dir(args.dir):
         s = r["score"]
         print(f"{r['key']}: S_R4 {s['score_composed']:.4f} ({s['termination_reason']})")
+    return 0
+
+
+def _gallery(args: argparse.Namespace) -> int:
+    from drivehierarchy.benchmark.r4 import gallery
+
+    entries = gallery.write_gallery(args.out, seed=args.seed)
+    print(f"{len(entries)} scenarios written to {args.out}")
     return 0

@@ -17,6 +17,7 @@ a run killed at any point resumes without redoing or losing finished scenarios.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import os
@@ -34,7 +35,7 @@ from drivehierarchy import __version__, _core
 from drivehierarchy._core import ConfigError
 from drivehierarchy.agents.base import Agent, ConstantAgent
 from drivehierarchy.agents.expert import ExpertAgent
-from drivehierarchy.envs.config import R4Config
+from drivehierarchy.envs.config import CameraConfig, R4Config
 from drivehierarchy.scenarios import builtin_scenarios
 
 
@@ -60,6 +61,9 @@ class AgentRegistry:
     def names(self) -> list[str]:
         return sorted(self._factories)
 
+
+# `--video`: the protocol's front camera at half size, one frame per decision (4 Hz).
+VIDEO_CAMERA_JSON = json.dumps(dataclasses.asdict(CameraConfig(width=400, height=225)))
 
 AGENTS = AgentRegistry()
 AGENTS.register("expert", ExpertAgent)
@@ -192,15 +196,13 @@ def write_manifest(out: Path, jobs: list[Job], opts: RunOptions) -> None:
 
 def run_scene(job: Job, opts: RunOptions, out: Path) -> dict[str, Any]:
     """Drives one scenario to its end and writes its files; returns its results line."""
-    from PIL import Image
-
     from drivehierarchy.agents.base import run_episode
     from drivehierarchy.envs.r4 import DriveHierarchyR4Env
 
     config = opts.config
-    want_images = opts.frames or opts.video
-    if not want_images:
-        # Agents that do not look at images (the expert) drive faster without them.
+    if not opts.frames:
+        # Agents that do not look at images (the expert) drive faster without them; the video
+        # renders its own small frames.
         config = config.replace(front=None, bev=None)
     env = DriveHierarchyR4Env(scenario=job.scenario, config=config)
     agent = AGENTS.create(opts.agent)
@@ -209,24 +211,28 @@ def run_scene(job: Job, opts: RunOptions, out: Path) -> dict[str, Any]:
     if opts.frames:
         frames_dir.mkdir(parents=True, exist_ok=True)
     scene_dir.mkdir(parents=True, exist_ok=True)
-    gif: list[Any] = []
+    gif = _core.GifWriter(str(scene_dir / "episode.gif"), fps=4) if opts.video else None
 
     def on_step(step: int, obs: dict[str, Any], reward: float, info: dict[str, Any]) -> None:
         if opts.frames:
+            from PIL import Image
+
             for key in ("front", "bev"):
                 if key in obs:
                     Image.fromarray(obs[key]).save(frames_dir / f"{step:04d}_{key}.png")
-        if opts.video and "front" in obs:
-            gif.append(Image.fromarray(obs["front"]).resize((400, 225)))
+        if gif is not None:
+            gif.push(env.sim.render_camera(VIDEO_CAMERA_JSON))
 
     t0 = time.perf_counter()
-    result = run_episode(env, agent, seed=opts.seed, on_step=on_step)
+    try:
+        result = run_episode(env, agent, seed=opts.seed, on_step=on_step)
+    finally:
+        if gif is not None:
+            gif.close()
     wall = time.perf_counter() - t0
     record = dict(result.score)
     _write_json_atomic(scene_dir / "scene_score.json", record)
     (scene_dir / "episode_log.json").write_text(env.unwrapped.sim.episode_log(), encoding="utf-8")
-    if gif:
-        gif[0].save(scene_dir / "episode.gif", save_all=True, append_images=gif[1:], duration=250, loop=0)
     env.close()
     return {
         "key": job.key,
