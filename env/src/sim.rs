@@ -62,8 +62,7 @@ impl Default for SimConfig {
 
 impl SimConfig {
     pub fn from_json(text: &str) -> Result<SimConfig> {
-        let cfg: SimConfig =
-            serde_json::from_str(text).map_err(|e| Error::config("config", text, e.to_string()))?;
+        let cfg: SimConfig = json_config("config", text)?;
         cfg.validate()?;
         Ok(cfg)
     }
@@ -80,6 +79,16 @@ impl SimConfig {
         }
         Ok(())
     }
+}
+
+/// Parses a JSON setting, naming the offending field (`config.front.width`) on error.
+pub fn json_config<T: serde::de::DeserializeOwned>(what: &str, text: &str) -> Result<T> {
+    let de = &mut serde_json::Deserializer::from_str(text);
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let path = e.path().to_string();
+        let field = if path == "." || path.is_empty() { what.to_owned() } else { format!("{what}.{path}") };
+        Error::config(field, text, e.into_inner().to_string())
+    })
 }
 
 /// An action of either mode.

@@ -222,7 +222,7 @@ impl PySim {
 }
 
 fn parse_json<T: serde::de::DeserializeOwned>(py: Python<'_>, field: &str, text: &str) -> PyResult<T> {
-    serde_json::from_str(text).map_err(|e| err(py, dh_env::Error::config(field, text, e.to_string())))
+    dh_env::sim::json_config(field, text).map_err(|e| err(py, e))
 }
 
 /// Animated GIF of RGB frames (H×W×3 uint8), e.g. an episode's front camera.

@@ -261,3 +261,9 @@ def test_reset_can_switch_scenarios() -> None:
     _, b = env.reset(seed=0, options={"scenario": "07_sudden_brake/town01_lead_brakes"})
     assert a["route_length_m"] != b["route_length_m"]
     assert env.sim.category == "07_sudden_brake"
+
+
+def test_a_wrongly_typed_setting_names_its_field() -> None:
+    with pytest.raises(ConfigError, match=r"config\.front\.width") as exc:
+        make(front={"width": "wide"})
+    assert "wide" in str(exc.value)
