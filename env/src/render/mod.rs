@@ -18,6 +18,8 @@ mod image;
 mod map;
 mod mesh;
 mod raster;
+#[cfg(test)]
+mod record;
 mod video;
 
 pub use bev::BevConfig;
