@@ -1,11 +1,12 @@
 //! Bird's-eye view (PROTOCOL §2.1): top-down, ego at the centre, ego forward = up, with the
 //! local route drawn as a red polyline, white dots with a red outline on its last points, and
-//! a yellow ego disc. Same precomputed geometry as the cameras, filled by the 2-D scanline
-//! rasterizer (no anti-aliasing: deterministic and fast).
+//! a yellow ego disc. Same precomputed geometry as the cameras, drawn as 2-D shapes through a
+//! [`RasterBackend`] (by default the scanline rasterizer: no anti-aliasing, deterministic and
+//! fast).
 
 use super::map::{Mat, RenderMap, N_LAYERS, N_MATS};
 use super::mesh::actor_dims;
-use super::raster::{fill_flat, fill_row, pattern, Target, SV};
+use super::raster::{Planes, RasterBackend, SV};
 use super::{FrameInput, Image, Renderer};
 use crate::error::{Error, Result};
 use crate::geom::Vec2;
@@ -85,34 +86,6 @@ impl View {
     }
 }
 
-fn quad(t: &mut Target, p: [SV; 4], col: [u8; 3]) {
-    fill_flat(t, p[0], p[1], p[2], col);
-    fill_flat(t, p[0], p[2], p[3], col);
-}
-
-fn disc(t: &mut Target, c: SV, r: f32, col: [u8; 3]) {
-    let n = if r > 6.0 { 24 } else { 12 };
-    let v = |i: usize| {
-        let a = std::f32::consts::TAU * i as f32 / n as f32;
-        SV { x: c.x + r * a.cos(), y: c.y + r * a.sin(), w: 1.0 }
-    };
-    for i in 0..n {
-        fill_flat(t, c, v(i), v(i + 1), col);
-    }
-}
-
-/// A thick line a→b in pixels (half width `hw`).
-fn line(t: &mut Target, a: SV, b: SV, hw: f32, col: [u8; 3]) {
-    let (dx, dy) = (b.x - a.x, b.y - a.y);
-    let len = (dx * dx + dy * dy).sqrt();
-    if len <= 1e-6 {
-        return;
-    }
-    let (nx, ny) = (-dy / len * hw, dx / len * hw);
-    let p = |s: &SV, k: f32| SV { x: s.x + nx * k, y: s.y + ny * k, w: 1.0 };
-    quad(t, [p(&a, 1.0), p(&b, 1.0), p(&b, -1.0), p(&a, -1.0)], col);
-}
-
 impl Renderer {
     /// Renders the bird's-eye view into `out` (resized to `size_px`², allocation reused).
     pub fn render_bev(
@@ -126,7 +99,24 @@ impl Renderer {
         frame.validate()?;
         out.resize(cfg.size_px, cfg.size_px);
         let n = cfg.size_px as usize;
-        fill_row(&mut out.data, &pattern(BACKGROUND));
+        let mut raster = std::mem::take(&mut self.raster);
+        raster.begin(std::mem::take(&mut out.data), n, n, Planes::Colour);
+        self.draw_bev(map, frame, cfg, &mut raster);
+        out.data = raster.finish();
+        self.raster = raster;
+        Ok(())
+    }
+
+    /// Issues the bird's-eye view of a validated frame and config to `b`, back to front.
+    pub(crate) fn draw_bev<B: RasterBackend>(
+        &mut self,
+        map: &RenderMap,
+        frame: &FrameInput,
+        cfg: &BevConfig,
+        b: &mut B,
+    ) {
+        let n = cfg.size_px as usize;
+        b.fill_rows(&|_| BACKGROUND);
         let ego = frame.ego.pose.pos - map.origin;
         let (sy, cy) = frame.ego.pose.yaw.sin_cos();
         let v = View {
@@ -136,7 +126,6 @@ impl Renderer {
             s: cfg.px_per_m as f32,
             c: n as f32 * 0.5,
         };
-        let mut t = Target { rgb: &mut out.data, width: n, height: n };
         let half = n as f32 * 0.5 / v.s * std::f32::consts::SQRT_2 + 2.0;
 
         self.cells.clear();
@@ -158,24 +147,24 @@ impl Renderer {
         };
         for layer in 0..N_LAYERS {
             for &ci in &self.cells {
-                let (a, b) = map.cells[ci].tris[layer];
-                for gt in &map.tris[a as usize..b as usize] {
+                let (i0, i1) = map.cells[ci].tris[layer];
+                for gt in &map.tris[i0 as usize..i1 as usize] {
                     let p = gt.p.map(|q| v.px(q));
                     if off(&p) {
                         continue;
                     }
-                    fill_flat(&mut t, p[0], p[1], p[2], cols[gt.mat as usize]);
+                    b.fill_convex(&p, cols[gt.mat as usize]);
                 }
             }
         }
         for &ci in &self.cells {
             let c = &map.cells[ci];
             for sg in &map.segs[c.segs.0 as usize..c.segs.1 as usize] {
-                let (a, b) = (v.px(sg.a), v.px(sg.b));
-                if off(&[a, b]) {
+                let (p, q) = (v.px(sg.a), v.px(sg.b));
+                if off(&[p, q]) {
                     continue;
                 }
-                line(&mut t, a, b, (sg.hw * v.s).max(0.5), cols[sg.mat as usize]);
+                b.stroke_segment(p, q, (sg.hw * v.s).max(0.5), cols[sg.mat as usize]);
             }
         }
         // Signal state bars across the controlled lane at its stop line.
@@ -189,19 +178,17 @@ impl Renderer {
             let p = l.stop_line.pos - map.origin;
             let f = Vec2::from_angle(l.stop_line.yaw);
             let across = f.perp() * (l.lane_width_m * 0.5);
-            let a = p - across;
-            let b = p + across;
-            line(
-                &mut t,
-                v.px([a.x as f32, a.y as f32]),
-                v.px([b.x as f32, b.y as f32]),
+            let (l0, l1) = (p - across, p + across);
+            b.stroke_segment(
+                v.px([l0.x as f32, l0.y as f32]),
+                v.px([l1.x as f32, l1.y as f32]),
                 (0.5 * v.s).max(1.0),
                 col,
             );
         }
         for s in frame.signs {
             let p = s.pose.pos - map.origin;
-            disc(&mut t, v.px([p.x as f32, p.y as f32]), (0.5 * v.s).max(1.5), [220, 30, 30]);
+            b.fill_disc(v.px([p.x as f32, p.y as f32]), (0.5 * v.s).max(1.5), [220, 30, 30]);
         }
         // Actors: dark outline, body colour, a light bar marking the front.
         for a in frame.actors {
@@ -217,9 +204,8 @@ impl Renderer {
             let corner = |fw: f32, lf: f32| v.px([px + fx * fw + lx * lf, py + fy * fw + ly * lf]);
             let o = 1.0 / v.s; // one pixel of outline
             let (hl, hw) = (l * 0.5, w * 0.5);
-            quad(
-                &mut t,
-                [
+            b.fill_convex(
+                &[
                     corner(hl + o, hw + o),
                     corner(-hl - o, hw + o),
                     corner(-hl - o, -hw - o),
@@ -227,12 +213,11 @@ impl Renderer {
                 ],
                 [15, 15, 15],
             );
-            quad(&mut t, [corner(hl, hw), corner(-hl, hw), corner(-hl, -hw), corner(hl, -hw)], a.color);
+            b.fill_convex(&[corner(hl, hw), corner(-hl, hw), corner(-hl, -hw), corner(hl, -hw)], a.color);
             if !a.kind.is_static() {
                 let fl = (l * 0.22).max(2.0 / v.s).min(l * 0.5);
-                quad(
-                    &mut t,
-                    [
+                b.fill_convex(
+                    &[
                         corner(hl, hw * 0.8),
                         corner(hl - fl, hw * 0.8),
                         corner(hl - fl, -hw * 0.8),
@@ -243,25 +228,19 @@ impl Renderer {
             }
         }
         // Route: red polyline through the points, dots on the last ones, then the ego disc.
-        let pts: Vec<SV> = frame
-            .route_points
-            .iter()
-            .map(|q| {
-                let r = *q - map.origin;
-                v.px([r.x as f32, r.y as f32])
-            })
-            .collect();
-        let lw = (ROUTE_LINE_M * v.s * 0.5).max(0.6);
-        for w in pts.windows(2) {
-            line(&mut t, w[0], w[1], lw, ROUTE_RED);
-            disc(&mut t, w[1], lw, ROUTE_RED);
-        }
+        let mut pts = std::mem::take(&mut self.pts);
+        pts.clear();
+        pts.extend(frame.route_points.iter().map(|q| {
+            let r = *q - map.origin;
+            v.px([r.x as f32, r.y as f32])
+        }));
+        b.stroke_polyline(&pts, (ROUTE_LINE_M * v.s * 0.5).max(0.6), ROUTE_RED);
         let dot_r = (ROUTE_DOT_M * v.s).max(1.5);
         for p in pts.iter().skip(pts.len().saturating_sub(cfg.route_dots_last as usize)) {
-            disc(&mut t, *p, dot_r, ROUTE_RED);
-            disc(&mut t, *p, (dot_r * 0.62).max(dot_r - 2.5), [255, 255, 255]);
+            b.fill_disc(*p, dot_r, ROUTE_RED);
+            b.fill_disc(*p, (dot_r * 0.62).max(dot_r - 2.5), [255, 255, 255]);
         }
-        disc(&mut t, v.px(v.ego), (EGO_DISC_M * v.s).max(2.0), EGO_YELLOW);
-        Ok(())
+        b.fill_disc(v.px(v.ego), (EGO_DISC_M * v.s).max(2.0), EGO_YELLOW);
+        self.pts = pts;
     }
 }

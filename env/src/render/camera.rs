@@ -1,4 +1,5 @@
-//! Perspective cameras: a pinhole model over a z-buffered scanline rasterizer.
+//! Perspective cameras: a pinhole model; projected, near-clipped polygons go to a
+//! [`RasterBackend`] (by default the z-buffered scanline rasterizer).
 //!
 //! Ground layers (roads, sidewalks, markings) lie on z = 0 and can never hide anything standing
 //! above the ground from a camera above it, so they are painted in layer order without depth;
@@ -6,7 +7,7 @@
 
 use super::map::{Mat, RenderMap, N_LAYERS, N_MATS};
 use super::mesh::{self, dot, Frame, Tri3};
-use super::raster::{fill_depth, fill_flat, fill_mask, fill_row, pattern, DepthPlanes, Target, SV};
+use super::raster::{fill_mask, Planes, RasterBackend, SV};
 use super::{FrameInput, Image, Renderer};
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
@@ -360,38 +361,33 @@ impl Renderer {
         out.resize(cfg.width, cfg.height);
         let s = cfg.supersample as usize;
         let cam = Cam::new(map, frame, cfg, s);
+        let mut raster = std::mem::take(&mut self.raster);
         if s == 1 {
-            let mut rgb = std::mem::take(&mut out.data);
-            self.draw_scene(map, frame, cfg, &cam, &mut rgb, false);
-            out.data = rgb;
+            raster.begin(std::mem::take(&mut out.data), cam.w, cam.h, Planes::Depth);
+            self.draw_scene(map, frame, cfg, &cam, &mut raster);
+            out.data = raster.finish();
         } else {
-            let mut ss = std::mem::take(&mut self.ss);
-            ss.resize(cam.w * cam.h * 3, 0);
-            self.draw_scene(map, frame, cfg, &cam, &mut ss, false);
+            raster.begin(std::mem::take(&mut self.ss), cam.w, cam.h, Planes::Depth);
+            self.draw_scene(map, frame, cfg, &cam, &mut raster);
+            let ss = raster.finish();
             downsample(&ss, cam.w, s, &mut out.data, cfg.width as usize, cfg.height as usize);
             self.ss = ss;
         }
+        self.raster = raster;
         Ok(())
     }
 
-    fn draw_scene(
+    /// Issues one camera's view to `b`: backdrop, ground layers and markings in painter's
+    /// order, then props and the dynamic scene depth-tested.
+    pub(crate) fn draw_scene<B: RasterBackend>(
         &mut self,
         map: &RenderMap,
         frame: &FrameInput,
         cfg: &CameraConfig,
         cam: &Cam,
-        rgb: &mut [u8],
-        with_ids: bool,
+        b: &mut B,
     ) {
-        let (w, h) = (cam.w, cam.h);
-        self.depth.clear();
-        self.depth.resize(w * h, 0.0);
-        if with_ids {
-            self.ids.clear();
-            self.ids.resize(w * h, 0);
-        }
-        background(cam, rgb);
-        let mut t = Target { rgb, width: w, height: h };
+        background(cam, b);
 
         // Cells in the draw-distance square, frustum-tested.
         self.cells.clear();
@@ -406,8 +402,8 @@ impl Renderer {
         for layer in 0..N_LAYERS {
             for &off in &self.cells {
                 let c = &map.cells[off];
-                let (a, b) = c.tris[layer];
-                for gt in &map.tris[a as usize..b as usize] {
+                let (i0, i1) = c.tris[layer];
+                for gt in &map.tris[i0 as usize..i1 as usize] {
                     let p = gt.p.map(|q| cam.to_cam([q[0], q[1], 0.0]));
                     if cam.outside(&p) {
                         continue;
@@ -419,9 +415,7 @@ impl Renderer {
                     let d = ((cxy[0] - cam.pos[0]).powi(2) + (cxy[1] - cam.pos[1]).powi(2)).sqrt();
                     let col = fogged(cols[gt.mat as usize], fog_k(d));
                     let n = cam.clip_project(p, &mut poly);
-                    for k in 1..n.saturating_sub(1) {
-                        fill_flat(&mut t, poly[0], poly[k], poly[k + 1], col);
-                    }
+                    b.fill_convex(&poly[..n], col);
                 }
             }
         }
@@ -456,9 +450,7 @@ impl Renderer {
                 let col = fogged(cols[sg.mat as usize], fog_k(d));
                 for tri in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
                     let n = cam.clip_project(tri, &mut poly);
-                    for k in 1..n.saturating_sub(1) {
-                        fill_flat(&mut t, poly[0], poly[k], poly[k + 1], col);
-                    }
+                    b.fill_convex(&poly[..n], col);
                 }
             }
         }
@@ -467,16 +459,14 @@ impl Renderer {
         let mut dynamic = std::mem::take(&mut self.tris);
         dynamic.clear();
         dynamic_tris(map, frame, cfg.draw_ego, &mut dynamic);
-        let mut dp =
-            DepthPlanes { depth: &mut self.depth, ids: if with_ids { Some(&mut self.ids) } else { None } };
         for &off in &self.cells {
             let c = &map.cells[off];
             for tr in &map.props[c.props.0 as usize..c.props.1 as usize] {
-                draw_tri3(cam, &mut t, &mut dp, tr, &mut poly);
+                draw_tri3(cam, b, tr, &mut poly);
             }
         }
         for tr in &dynamic {
-            draw_tri3(cam, &mut t, &mut dp, tr, &mut poly);
+            draw_tri3(cam, b, tr, &mut poly);
         }
         self.tris = dynamic;
     }
@@ -492,10 +482,11 @@ impl Renderer {
         cfg.validate()?;
         frame.validate()?;
         let cam = Cam::new(map, frame, cfg, 1);
-        let mut rgb = std::mem::take(&mut self.ss);
-        rgb.resize(cam.w * cam.h * 3, 0);
-        self.draw_scene(map, frame, cfg, &cam, &mut rgb, true);
-        self.ss = rgb;
+        let mut raster = std::mem::take(&mut self.raster);
+        raster.begin(std::mem::take(&mut self.ss), cam.w, cam.h, Planes::DepthIds);
+        self.draw_scene(map, frame, cfg, &cam, &mut raster);
+        self.ss = raster.finish();
+        let ids = raster.ids();
         let (w, h) = (cam.w, cam.h);
         let mut mask = std::mem::take(&mut self.mask);
         mask.clear();
@@ -537,7 +528,7 @@ impl Renderer {
                         x1 = x1.max(x + 1);
                         y0 = y0.min(y);
                         y1 = y1.max(y + 1);
-                        if self.ids[y * w + x] == stamp {
+                        if ids[y * w + x] == stamp {
                             visible += 1;
                         }
                     }
@@ -558,12 +549,13 @@ impl Renderer {
         }
         self.tris = tris;
         self.mask = mask;
+        self.raster = raster;
         Ok(res)
     }
 }
 
 #[inline(always)]
-fn draw_tri3(cam: &Cam, t: &mut Target, dp: &mut DepthPlanes, tr: &Tri3, poly: &mut [SV; 4]) {
+fn draw_tri3<B: RasterBackend>(cam: &Cam, b: &mut B, tr: &Tri3, poly: &mut [SV; 4]) {
     let p0 = tr.p[0];
     if !tr.two_sided {
         let v = [p0[0] - cam.pos[0], p0[1] - cam.pos[1], p0[2] - cam.pos[2]];
@@ -582,28 +574,24 @@ fn draw_tri3(cam: &Cam, t: &mut Target, dp: &mut DepthPlanes, tr: &Tri3, poly: &
         fogged(tr.col, fog_k(d))
     };
     let n = cam.clip_project(c, poly);
-    for k in 1..n.saturating_sub(1) {
-        fill_depth(t, dp, poly[0], poly[k], poly[k + 1], col, tr.id);
-    }
+    b.fill_convex_depth(&poly[..n], col, tr.id);
 }
 
 /// Sky gradient above the horizon, fogged grass below; constant along each row because the
 /// camera has no roll.
-fn background(cam: &Cam, rgb: &mut [u8]) {
-    let w = cam.w;
-    for y in 0..cam.h {
+fn background<B: RasterBackend>(cam: &Cam, b: &mut B) {
+    b.fill_rows(&|y| {
         let yc = (y as f32 + 0.5 - cam.cy) / cam.fx;
         let dir = [cam.d[0] * yc + cam.f[0], cam.d[1] * yc + cam.f[1], cam.d[2] * yc + cam.f[2]];
         let horiz = (dir[0] * dir[0] + dir[1] * dir[1]).sqrt();
-        let col = if dir[2] >= 0.0 {
+        if dir[2] >= 0.0 {
             let elev = dir[2] / horiz.max(1e-6);
             lerp3(HORIZON, SKY_TOP, (elev * 2.5).min(1.0))
         } else {
             let dist = cam.pos[2] / -dir[2] * horiz;
             fogged(GRASS.map(|v| v as u8), ((dist - FOG0) / (FOG1 * 1.6 - FOG0)).clamp(0.0, 1.0))
-        };
-        fill_row(&mut rgb[y * w * 3..(y + 1) * w * 3], &pattern(col));
-    }
+        }
+    });
 }
 
 /// Box-filters an s×-supersampled RGB buffer down to `w × h`.

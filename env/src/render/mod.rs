@@ -1,6 +1,10 @@
 //! Rendering: perspective cameras (z-buffered scanline rasterizer) and the bird's-eye view, on
 //! the CPU, deterministic (same state ⇒ same bytes), without per-frame allocation once warm.
 //!
+//! Both views compute screen-space geometry and draw it through one backend trait
+//! (`raster::RasterBackend`: backdrop rows, convex fills with and without depth, strokes,
+//! discs); the scanline `raster::SoftwareRaster` is the backend behind every public entry point.
+//!
 //! - [`RenderMap`] precomputes a road network's static geometry once per map.
 //! - [`FrameInput`] is one tick's dynamic state (plain views, no world references).
 //! - [`render_camera`] / [`render_bev`] / [`project_actors`] draw into caller-provided
@@ -14,6 +18,8 @@ mod image;
 mod map;
 mod mesh;
 mod raster;
+#[cfg(test)]
+mod record;
 mod video;
 
 pub use bev::BevConfig;
@@ -77,17 +83,17 @@ impl FrameInput<'_> {
 /// one per thread; results never depend on what it rendered before.
 #[derive(Default)]
 pub struct Renderer {
-    depth: Vec<f32>,
-    ids: Vec<u32>,
+    raster: raster::SoftwareRaster,
     mask: Vec<u32>,
     ss: Vec<u8>,
     tris: Vec<mesh::Tri3>,
     cells: Vec<usize>,
+    pts: Vec<raster::SV>,
 }
 
 impl std::fmt::Debug for Renderer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Renderer").field("depth_len", &self.depth.len()).finish()
+        f.debug_struct("Renderer").field("raster", &self.raster).finish()
     }
 }
 

@@ -1,10 +1,15 @@
-//! Scanline triangle fill into RGB8 buffers, with and without a depth buffer.
+//! The drawing seam of the renderer: [`RasterBackend`], the primitives both the cameras and the
+//! BEV issue, and [`SoftwareRaster`], its scanline implementation into RGB8 buffers (with an
+//! optional depth and id plane).
+//!
+//! The views compute geometry (projection, clipping, culling, colours) and hand screen-space
+//! shapes to a backend; a backend only turns shapes into pixels (or, in tests, records them).
 //!
 //! Pixel centres sit at (x + 0.5, y + 0.5); a pixel is covered when its centre lies in
 //! [left, right) × [top, bottom) of the triangle's span — a top-left style rule, so shared edges
 //! are filled exactly once and results are deterministic.
 
-/// A colour target: RGB8 rows (`stride` bytes per row) plus its size in pixels.
+/// A colour target: RGB8 rows (`width * 3` bytes each) plus its size in pixels.
 pub(crate) struct Target<'a> {
     pub rgb: &'a mut [u8],
     pub width: usize,
@@ -93,13 +98,12 @@ pub(crate) fn fill_row(row: &mut [u8], pat: &[u8; 192]) {
     }
 }
 
-/// Fills a triangle with a flat colour, no depth (painter's order).
-pub(crate) fn fill_flat(t: &mut Target, a: SV, b: SV, c: SV, col: [u8; 3]) {
+/// Fills a triangle with a flat colour (given as its [`pattern`]), no depth (painter's order).
+pub(crate) fn fill_flat(t: &mut Target, a: SV, b: SV, c: SV, pat: &[u8; 192]) {
     let w = t.width;
     let rgb = &mut *t.rgb;
-    let pat = pattern(col);
     for_spans(a, b, c, t.width, t.height, |y, x0, x1| {
-        fill_row(&mut rgb[(y * w + x0) * 3..(y * w + x1) * 3], &pat);
+        fill_row(&mut rgb[(y * w + x0) * 3..(y * w + x1) * 3], pat);
     });
 }
 
@@ -173,6 +177,173 @@ pub(crate) fn fill_mask(
         }
     });
     n
+}
+
+/// The primitives the cameras and the BEV draw with, in screen space (pixels; `SV::w` = 1/z
+/// for depth-tested fills, ignored otherwise). Calls are made in painter's order; the views
+/// are generic over the backend, so the per-primitive calls dispatch statically.
+///
+/// Only the fills are required; strokes and discs default to their fixed tessellation into
+/// fills (the bytes every golden image depends on), and a backend may override them to keep
+/// the shapes (a recorder, a vector backend).
+pub(crate) trait RasterBackend {
+    /// Paints each pixel row `y` in one colour `row_colour(y)`: a flat clear or the sky
+    /// gradient. Depth and ids are not touched.
+    fn fill_rows(&mut self, row_colour: &dyn Fn(usize) -> [u8; 3]);
+
+    /// Fills a convex polygon (fewer than 3 points draw nothing), fanned from its first
+    /// vertex, without a depth test.
+    fn fill_convex(&mut self, pts: &[SV], col: [u8; 3]);
+
+    /// Fills a convex polygon fanned from its first vertex, keeping pixels where it is nearer
+    /// than what was drawn there (larger `w`); covered pixels take `id` (actor index + 1,
+    /// 0 = none) for the projection helper.
+    fn fill_convex_depth(&mut self, pts: &[SV], col: [u8; 3], id: u32);
+
+    /// A thick segment a→b with square (butt) ends, half width `hw`.
+    fn stroke_segment(&mut self, a: SV, b: SV, hw: f32, col: [u8; 3]) {
+        let (dx, dy) = (b.x - a.x, b.y - a.y);
+        let len = (dx * dx + dy * dy).sqrt();
+        if len <= 1e-6 {
+            return;
+        }
+        let (nx, ny) = (-dy / len * hw, dx / len * hw);
+        let p = |s: &SV, k: f32| SV { x: s.x + nx * k, y: s.y + ny * k, w: 1.0 };
+        self.fill_convex(&[p(&a, 1.0), p(&b, 1.0), p(&b, -1.0), p(&a, -1.0)], col);
+    }
+
+    /// A thick polyline, half width `hw`: round joins and a round cap at its last point (the
+    /// first point stays square; the BEV's ego disc sits there).
+    fn stroke_polyline(&mut self, pts: &[SV], hw: f32, col: [u8; 3]) {
+        for w in pts.windows(2) {
+            self.stroke_segment(w[0], w[1], hw, col);
+            self.fill_disc(w[1], hw, col);
+        }
+    }
+
+    /// A filled disc of radius `r`: a 12-gon, 24-gon above 6 px, fanned from the centre.
+    fn fill_disc(&mut self, c: SV, r: f32, col: [u8; 3]) {
+        let n = if r > 6.0 { 24 } else { 12 };
+        let v = |i: usize| {
+            let a = std::f32::consts::TAU * i as f32 / n as f32;
+            SV { x: c.x + r * a.cos(), y: c.y + r * a.sin(), w: 1.0 }
+        };
+        for i in 0..n {
+            self.fill_convex(&[c, v(i), v(i + 1)], col);
+        }
+    }
+}
+
+/// Which planes a [`SoftwareRaster`] frame keeps besides colour.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) enum Planes {
+    /// Colour only (the BEV); depth-tested fills then draw untested, in painter's order.
+    #[default]
+    Colour,
+    /// Colour and depth (cameras).
+    Depth,
+    /// Colour, depth and actor ids (the projection helper).
+    DepthIds,
+}
+
+/// The default backend: the scanline rasterizer above, into an RGB8 buffer it holds for one
+/// frame (taken from the caller's [`super::Image`] and handed back, so no copy) plus depth and
+/// id planes it keeps allocated across frames.
+#[derive(Default)]
+pub(crate) struct SoftwareRaster {
+    rgb: Vec<u8>,
+    width: usize,
+    height: usize,
+    planes: Planes,
+    depth: Vec<f32>,
+    ids: Vec<u32>,
+}
+
+impl SoftwareRaster {
+    /// Starts a `width × height` frame on `rgb` (resized; colour unspecified until painted),
+    /// with the `planes` reset to "nothing drawn" (depth 0 = infinitely far, id 0).
+    pub fn begin(&mut self, mut rgb: Vec<u8>, width: usize, height: usize, planes: Planes) {
+        rgb.resize(width * height * 3, 0);
+        self.rgb = rgb;
+        self.width = width;
+        self.height = height;
+        self.planes = planes;
+        if planes != Planes::Colour {
+            self.depth.clear();
+            self.depth.resize(width * height, 0.0);
+        }
+        if planes == Planes::DepthIds {
+            self.ids.clear();
+            self.ids.resize(width * height, 0);
+        }
+    }
+
+    /// Ends the frame, handing the colour buffer back.
+    pub fn finish(&mut self) -> Vec<u8> {
+        std::mem::take(&mut self.rgb)
+    }
+
+    /// The id plane of the last [`Planes::DepthIds`] frame (row-major, one per pixel).
+    pub fn ids(&self) -> &[u32] {
+        &self.ids
+    }
+
+    fn target(&mut self) -> Target<'_> {
+        Target { rgb: &mut self.rgb, width: self.width, height: self.height }
+    }
+}
+
+impl std::fmt::Debug for SoftwareRaster {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SoftwareRaster")
+            .field("depth_len", &self.depth.len())
+            .field("ids_len", &self.ids.len())
+            .finish()
+    }
+}
+
+impl RasterBackend for SoftwareRaster {
+    fn fill_rows(&mut self, row_colour: &dyn Fn(usize) -> [u8; 3]) {
+        let w3 = self.width * 3;
+        let mut last: Option<([u8; 3], [u8; 192])> = None;
+        for (y, row) in self.rgb.chunks_exact_mut(w3.max(1)).enumerate() {
+            let col = row_colour(y);
+            let pat = match last {
+                Some((c, p)) if c == col => p,
+                _ => pattern(col),
+            };
+            fill_row(row, &pat);
+            last = Some((col, pat));
+        }
+    }
+
+    #[inline]
+    fn fill_convex(&mut self, pts: &[SV], col: [u8; 3]) {
+        if pts.len() < 3 {
+            return;
+        }
+        let pat = pattern(col);
+        let mut t = self.target();
+        for k in 1..pts.len() - 1 {
+            fill_flat(&mut t, pts[0], pts[k], pts[k + 1], &pat);
+        }
+    }
+
+    #[inline]
+    fn fill_convex_depth(&mut self, pts: &[SV], col: [u8; 3], id: u32) {
+        if self.planes == Planes::Colour {
+            return self.fill_convex(pts, col);
+        }
+        if pts.len() < 3 {
+            return;
+        }
+        let mut t = Target { rgb: &mut self.rgb, width: self.width, height: self.height };
+        let ids = if self.planes == Planes::DepthIds { Some(&mut self.ids[..]) } else { None };
+        let mut d = DepthPlanes { depth: &mut self.depth, ids };
+        for k in 1..pts.len() - 1 {
+            fill_depth(&mut t, &mut d, pts[0], pts[k], pts[k + 1], col, id);
+        }
+    }
 }
 
 #[cfg(test)]
