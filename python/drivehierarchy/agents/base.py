@@ -12,7 +12,10 @@ import numpy as np
 
 @runtime_checkable
 class Agent(Protocol):
-    """A driving policy. `reset` is called after each `env.reset`; `act` once per decision."""
+    """A driving policy. `reset` is called after each `env.reset`; `act` once per decision.
+
+    An agent may set `uses_images = False` to let runners drop image observations (faster).
+    """
 
     name: str
 
@@ -56,6 +59,8 @@ def run_episode(
 
 class ConstantAgent:
     """Holds one action forever (zero-speed and off-road probes, smoke tests)."""
+
+    uses_images = False
 
     def __init__(self, action: Any, name: str = "constant") -> None:
         self.action = np.asarray(action, dtype=np.float32)

@@ -14,6 +14,7 @@ import numpy as np
 
 class ExpertAgent:
     name = "expert"
+    uses_images = False
 
     def __init__(self) -> None:
         self._env: Any = None

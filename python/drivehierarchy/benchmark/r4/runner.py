@@ -200,12 +200,12 @@ def run_scene(job: Job, opts: RunOptions, out: Path) -> dict[str, Any]:
     from drivehierarchy.envs.r4 import DriveHierarchyR4Env
 
     config = opts.config
-    if not opts.frames:
-        # Agents that do not look at images (the expert) drive faster without them; the video
-        # renders its own small frames.
+    agent = AGENTS.create(opts.agent)
+    if not opts.frames and not getattr(agent, "uses_images", True):
+        # Agents that never look at images (the expert) drive much faster without them; the
+        # video renders its own small frames.
         config = config.replace(front=None, bev=None)
     env = DriveHierarchyR4Env(scenario=job.scenario, config=config)
-    agent = AGENTS.create(opts.agent)
     scene_dir = out / "scenes" / job.key
     frames_dir = scene_dir / "frames"
     if opts.frames:
