@@ -169,6 +169,28 @@ fn traffic_light_colour_reads_at_30_m() {
 }
 
 #[test]
+fn a_cross_street_signal_seen_side_on_shows_no_lit_lamp() {
+    let (_, map) = world();
+    let e = ego();
+    let ep = ego_pose();
+    // A head 25 m ahead and 8 m to the right whose lamps face left, across the ego's path (it
+    // controls the cross street): the ego sees its face 72° off axis, so the visor hides it.
+    let side_yaw = ep.yaw - std::f64::consts::FRAC_PI_2;
+    let head = ep.local_to_world(25.0, -8.0);
+    let stop_line = Pose::new(head - Vec2::from_angle(side_yaw) * 15.0, side_yaw);
+    let light = TrafficLightView {
+        tl_id: "t".into(),
+        lane_id: "no-such-lane".into(),
+        stop_line,
+        lane_width_m: 3.2,
+        color: LightColor::Red,
+    };
+    let mut img = Image::default();
+    render_camera(map, &frame(&e, &[], &[light], &[]), &CameraConfig::front(), &mut img).unwrap();
+    assert_eq!(lamp_pixels(&img), (0, 0, 0));
+}
+
+#[test]
 fn bev_draws_route_and_ego_as_the_protocol_says() {
     let (_, map) = world();
     let e = ego();

@@ -322,6 +322,9 @@ fn lerp3(a: [f32; 3], b: [f32; 3], t: f32) -> [u8; 3] {
     [(a[0] + (b[0] - a[0]) * t) as u8, (a[1] + (b[1] - a[1]) * t) as u8, (a[2] + (b[2] - a[2]) * t) as u8]
 }
 
+/// cos of the half-angle within which a signal's lit lamp is visible (visor cone, 55°).
+const VISOR_COS: f64 = 0.57;
+
 /// Appends the dynamic scene (actors, signals, signs) to `out`; actor triangles carry
 /// id = index in `frame.actors` + 1, the ego `u32::MAX` when drawn.
 pub(crate) fn dynamic_tris(map: &RenderMap, frame: &FrameInput, draw_ego: bool, out: &mut Vec<Tri3>) {
@@ -339,7 +342,11 @@ pub(crate) fn dynamic_tris(map: &RenderMap, frame: &FrameInput, draw_ego: bool, 
         let far = place.map_or(15.0, |p| p.far_m);
         let right = place.map_or(l.lane_width_m as f32 * 0.5 + 0.8, |p| p.right_m);
         let fr = Frame::new(l.stop_line.pos, l.stop_line.yaw, map.origin, 0.0).offset(far, 0.0, 0.0);
-        mesh::signal(out, &fr, 5.2, l.color, Some(right));
+        // The head faces back along the lane; its lit lamp shows within the visor's cone only.
+        let head = l.stop_line.pos + l.stop_line.forward() * f64::from(far);
+        let to_viewer = (frame.ego.pose.pos - head).normalized();
+        let lit_visible = to_viewer.dot(-l.stop_line.forward()) >= VISOR_COS;
+        mesh::signal(out, &fr, 5.2, l.color, Some(right), lit_visible);
     }
     for s in frame.signs {
         let fr = Frame::new(s.pose.pos, s.pose.yaw, map.origin, 0.0);

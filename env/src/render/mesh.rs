@@ -468,16 +468,26 @@ fn lamp(slot: usize, state: LightColor) -> ([u8; 3], bool) {
 pub(crate) const LAMP_R: f32 = 0.3;
 
 /// A signal head facing `-fr.f` (towards approaching traffic), its lamps centred at height z,
-/// hanging from a mast arm to a pole `pole_right` metres to the right of the head.
-pub(crate) fn signal(out: &mut Vec<Tri3>, fr: &Frame, z: f32, state: LightColor, pole_right: Option<f32>) {
+/// hanging from a mast arm to a pole `pole_right` metres to the right of the head. `lit_visible`
+/// = false draws every lamp dark: real heads have visors, so a lit lamp cannot be seen from far
+/// off its axis (the cross street's red must not read as the ego's own signal).
+pub(crate) fn signal(
+    out: &mut Vec<Tri3>,
+    fr: &Frame,
+    z: f32,
+    state: LightColor,
+    pole_right: Option<f32>,
+    lit_visible: bool,
+) {
     let mut m = Mesh { out, id: 0 };
     let dark = [28, 28, 30];
     let hh = LAMP_R * 3.6;
     m.bx(fr, 0.0, 0.0, z - hh, z + hh, 0.2, LAMP_R + 0.12, &all(dark));
     // Lamps on the face looking back along -f.
     let back = Frame { o: fr.o, f: [-fr.f[0], -fr.f[1]], l: [-fr.l[0], -fr.l[1]] };
+    let shown = if lit_visible { state } else { LightColor::Off };
     for slot in 0..3 {
-        let (c, em) = lamp(slot, state);
+        let (c, em) = lamp(slot, shown);
         let zc = z + (1.0 - slot as f32) * LAMP_R * 2.35;
         m.plate(&back, 0.22, 0.0, zc, LAMP_R, 12, 0.0, c, em);
     }
