@@ -29,7 +29,8 @@ def test_evaluate_writes_records_logs_and_summary(tmp_path: Path) -> None:
         scene = out / "scenes" / r["key"]
         record = json.loads((scene / "scene_score.json").read_text())
         assert record["score_composed"] >= 90.0
-        assert (scene / "episode_log.json").stat().st_size > 0
+        assert (scene / "episode_log.jsonl").stat().st_size > 0
+        assert json.loads((scene / "events.json").read_text()) == record["events"]
     summary = json.loads((out / "summary.json").read_text())
     assert summary["r4_score"] == pytest.approx(sum(r["score"]["score_composed"] for r in results) / 2)
     manifest = json.loads((out / "manifest.json").read_text())

@@ -6,7 +6,10 @@ Layout of an output directory:
     results.jsonl                     one scene score record per finished scenario (append-only)
     scenes/<category>__<name>/
         scene_score.json              the protocol's record (+ ours)
-        episode_log.json              route, trajectory and contacts: enough to re-score offline
+        episode_log.jsonl             header (route, start, destination, T_ref, parameters), one line
+                                      per tick (pose, speed, on-road, contacts), end: the trajectory,
+                                      enough to re-score offline
+        events.json                   the scored events (collisions, timeouts, red lights, ...)
         frames/NNNN_front.png, NNNN_bev.png   (--frames)
         episode.gif                   (--video)
     summary.csv, summary.md           category means and the R4 score (mean of categories)
@@ -232,7 +235,8 @@ def run_scene(job: Job, opts: RunOptions, out: Path) -> dict[str, Any]:
     wall = time.perf_counter() - t0
     record = dict(result.score)
     _write_json_atomic(scene_dir / "scene_score.json", record)
-    (scene_dir / "episode_log.json").write_text(env.unwrapped.sim.episode_log(), encoding="utf-8")
+    (scene_dir / "episode_log.jsonl").write_text(env.unwrapped.sim.episode_log(), encoding="utf-8")
+    _write_json_atomic(scene_dir / "events.json", record["events"])
     env.close()
     return {
         "key": job.key,
@@ -324,13 +328,13 @@ def summary_table(results: list[dict[str, Any]], summary: dict[str, Any] | None 
 
 def rescore_dir(out: Path) -> list[dict[str, Any]]:
     """Recomputes every scene score of a run from its episode logs, without simulating."""
-    scenes = sorted((out / "scenes").glob("*/episode_log.json"))
+    scenes = sorted((out / "scenes").glob("*/episode_log.jsonl"))
     if not scenes:
-        single = out / "episode_log.json"
+        single = out / "episode_log.jsonl"
         if single.exists():
             scenes = [single]
         else:
-            raise ConfigError(f"{out}: no episode_log.json found (expected scenes/*/episode_log.json)")
+            raise ConfigError(f"{out}: no episode_log.jsonl found (expected scenes/*/episode_log.jsonl)")
     rescored = []
     for log_path in scenes:
         record = json.loads(_core.rescore(log_path.read_text(encoding="utf-8")))
