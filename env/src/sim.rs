@@ -194,7 +194,8 @@ pub struct StepInfo {
     pub time_s: f64,
     pub decision: u64,
     pub command: u8,
-    pub progress_m: f64,
+    /// Best progress along the route so far (what S_route counts), metres.
+    pub best_progress_m: f64,
     pub route_length_m: f64,
     pub distance_to_go_m: f64,
     pub on_road: bool,
@@ -629,7 +630,7 @@ impl Sim {
             time_s: ep.world.time_s(),
             decision: ep.decisions,
             command: navigation_command(&view.points) as u8,
-            progress_m: ep.score.best_progress_m(),
+            best_progress_m: ep.score.best_progress_m(),
             route_length_m: ep.score.route_length_m(),
             distance_to_go_m: view.distance_to_go_m.unwrap_or(0.0),
             on_road: ep.on_road,
