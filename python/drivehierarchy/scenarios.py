@@ -10,20 +10,13 @@ DEFAULT_SCENARIO = "03_turning/town01_right_turn_signalised"
 
 
 def builtin_root() -> Path:
-    """The `scenarios/` folder of the source tree the package was installed from."""
-    return Path(__file__).resolve().parents[2] / "scenarios"
+    """The shipped scenario data (`scenarios/` at the top of a checkout links here)."""
+    return Path(__file__).resolve().parent / "_data" / "scenarios"
 
 
 def builtin_scenarios() -> list[Path]:
     """Every built-in R4 scenario file, in suite order (category, then name)."""
-    root = builtin_root() / "r4"
-    if not root.is_dir():
-        # The suite ships in the source tree (editable installs), not inside the wheel.
-        raise ScenarioError(
-            f"built-in scenarios not found at {root}: install from a checkout with `pip install -e .`, "
-            "or pass scenario files by path"
-        )
-    return sorted(root.glob("*/*.toml"))
+    return sorted((builtin_root() / "r4").glob("*/*.toml"))
 
 
 def scenario_id(path: Path) -> str:
