@@ -3,6 +3,12 @@
 
 use crate::pyunicode;
 
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Style {
+    Repr,
+    Json,
+}
+
 /// A value as Python's `json.loads` would build it.
 #[derive(Debug, Clone, PartialEq)]
 pub enum PyValue {
@@ -77,66 +83,31 @@ impl PyValue {
 
     /// `repr(value)` appended to `out`.
     pub fn write_repr(&self, out: &mut String) {
-        match self {
-            PyValue::None => out.push_str("None"),
-            PyValue::Bool(true) => out.push_str("True"),
-            PyValue::Bool(false) => out.push_str("False"),
-            PyValue::Int(t) => out.push_str(t),
-            PyValue::Float(f) => out.push_str(&float_repr(*f)),
-            PyValue::Str(s) => str_repr(s, out),
-            PyValue::List(items) => {
-                out.push('[');
-                for (i, item) in items.iter().enumerate() {
-                    if i > 0 {
-                        out.push_str(", ");
-                    }
-                    item.write_repr(out);
-                }
-                out.push(']');
-            }
-            PyValue::Dict(items) => {
-                out.push('{');
-                for (i, (k, v)) in items.iter().enumerate() {
-                    if i > 0 {
-                        out.push_str(", ");
-                    }
-                    str_repr(k, out);
-                    out.push_str(": ");
-                    v.write_repr(out);
-                }
-                out.push('}');
-            }
-        }
+        self.write(out, Style::Repr);
     }
 
     /// `json.dumps(value, ensure_ascii=False)`.
     pub fn dumps(&self) -> String {
         let mut out = String::new();
-        self.write_dumps(&mut out);
+        self.write(&mut out, Style::Json);
         out
     }
 
-    fn write_dumps(&self, out: &mut String) {
+    /// Python's `repr` and `json.dumps` differ only in scalars and string quoting; containers
+    /// are walked the same way.
+    fn write(&self, out: &mut String, style: Style) {
+        let key = |k: &str, out: &mut String| match style {
+            Style::Repr => str_repr(k, out),
+            Style::Json => dumps_str(k, out),
+        };
         match self {
-            PyValue::None => out.push_str("null"),
-            PyValue::Bool(true) => out.push_str("true"),
-            PyValue::Bool(false) => out.push_str("false"),
-            PyValue::Int(t) => out.push_str(t),
-            PyValue::Float(f) => out.push_str(&if f.is_nan() {
-                "NaN".to_string()
-            } else if f.is_infinite() {
-                if *f > 0.0 { "Infinity" } else { "-Infinity" }.to_string()
-            } else {
-                float_repr(*f)
-            }),
-            PyValue::Str(s) => dumps_str(s, out),
             PyValue::List(items) => {
                 out.push('[');
                 for (i, item) in items.iter().enumerate() {
                     if i > 0 {
                         out.push_str(", ");
                     }
-                    item.write_dumps(out);
+                    item.write(out, style);
                 }
                 out.push(']');
             }
@@ -146,11 +117,29 @@ impl PyValue {
                     if i > 0 {
                         out.push_str(", ");
                     }
-                    dumps_str(k, out);
+                    key(k, out);
                     out.push_str(": ");
-                    v.write_dumps(out);
+                    v.write(out, style);
                 }
                 out.push('}');
+            }
+            PyValue::Str(s) => key(s, out),
+            PyValue::Int(t) => out.push_str(t),
+            PyValue::None => out.push_str(if style == Style::Repr { "None" } else { "null" }),
+            PyValue::Bool(b) => out.push_str(match (style, b) {
+                (Style::Repr, true) => "True",
+                (Style::Repr, false) => "False",
+                (Style::Json, true) => "true",
+                (Style::Json, false) => "false",
+            }),
+            PyValue::Float(f) => {
+                if style == Style::Json && f.is_nan() {
+                    out.push_str("NaN");
+                } else if style == Style::Json && f.is_infinite() {
+                    out.push_str(if *f > 0.0 { "Infinity" } else { "-Infinity" });
+                } else {
+                    out.push_str(&float_repr(*f));
+                }
             }
         }
     }
