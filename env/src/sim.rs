@@ -16,7 +16,7 @@ use crate::score::{
     TrajectorySample,
 };
 use crate::view::{ActorView, LightColor, TrafficLightView};
-use crate::world::World;
+use crate::world::{TrafficModel, World};
 use crate::{Error, Result, DECISION_INTERVAL_TICKS};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -226,6 +226,8 @@ pub struct Sim {
     /// (arc length on the route, index into the world's light views) of the route's signal heads.
     route_lights: Vec<(f64, usize)>,
     episode: Option<Episode>,
+    /// Background-traffic model for the next episode (moves into its world at reset).
+    traffic: Option<Box<dyn TrafficModel>>,
 }
 
 #[derive(Debug)]
@@ -267,6 +269,7 @@ impl Sim {
             tracker,
             route_lights: Vec::new(),
             episode: None,
+            traffic: None,
         })
     }
 
@@ -289,7 +292,8 @@ impl Sim {
 
     /// Starts a new episode from t = 0.
     pub fn reset(&mut self, seed: u64) -> Result<(Observation, StepInfo)> {
-        let world = World::new(&self.scenario, seed)?;
+        let mut world = World::new(&self.scenario, seed)?;
+        self.start_traffic(&mut world)?;
         let route = self.tracker.route().clone();
         let start = self.scenario.ego.start.pos;
         let score = ScoreTracker::new(
@@ -405,6 +409,35 @@ impl Sim {
         let observation = self.observe()?;
         let info = self.info(step_contacts)?;
         Ok(StepOutcome { observation, reward, terminated, info })
+    }
+
+    /// Sets the background-traffic model used from the next `reset` on (`None`: no traffic).
+    pub fn set_traffic(&mut self, model: Option<Box<dyn TrafficModel>>) {
+        if let Some(ep) = self.episode.as_mut() {
+            ep.world.detach_traffic();
+        }
+        self.traffic = model;
+    }
+
+    /// Name of the traffic model in use ("sumo", "native"), if any.
+    pub fn traffic_name(&self) -> Option<&str> {
+        match &self.traffic {
+            Some(m) => Some(m.name()),
+            None => self.episode.as_ref().and_then(|e| e.world.traffic_name()),
+        }
+    }
+
+    /// Moves the traffic model (set, or kept from the previous episode) into `world` and starts
+    /// it; on failure the model is kept for the next try.
+    fn start_traffic(&mut self, world: &mut World) -> Result<()> {
+        let model =
+            self.traffic.take().or_else(|| self.episode.as_mut().and_then(|e| e.world.detach_traffic()));
+        let Some(model) = model else { return Ok(()) };
+        let res = world.attach_traffic(model);
+        if res.is_err() {
+            self.traffic = world.detach_traffic();
+        }
+        res
     }
 
     fn route_score(&self) -> f64 {

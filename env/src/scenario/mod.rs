@@ -4,6 +4,7 @@
 pub mod parse;
 pub mod resolve;
 pub mod schema;
+pub mod traffic;
 
 pub use parse::{parse_scenario_file, parse_scenario_str};
 pub use resolve::{
@@ -13,6 +14,7 @@ pub use resolve::{
     SNAP_DISTANCE_M, SUMO_PREFIX,
 };
 pub use schema::{ScenarioFile, CATEGORIES, SCENARIO_VERSION};
+pub use traffic::{TrafficDemand, TrafficMode};
 
 use crate::Result;
 use serde::Serialize;
