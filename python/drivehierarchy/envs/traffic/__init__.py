@@ -6,5 +6,6 @@ lives in the Rust world (`dh_env::world::idm`).
 """
 
 from drivehierarchy.envs.traffic.sumo import TRAFFIC_MODES, SumoTraffic, resolve_traffic_mode
+from drivehierarchy.envs.traffic.vector import TrafficVectorEnv, sumo_vector_env
 
-__all__ = ["TRAFFIC_MODES", "SumoTraffic", "resolve_traffic_mode"]
+__all__ = ["TRAFFIC_MODES", "SumoTraffic", "TrafficVectorEnv", "resolve_traffic_mode", "sumo_vector_env"]
