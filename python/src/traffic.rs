@@ -76,7 +76,7 @@ impl SumoBridge {
         for tl in self.map.tl_ids() {
             let Some(logic) = self.map.tl_logic(tl) else { continue };
             let cycle = logic.cycle_s();
-            if logic.phases.is_empty() || !(cycle > 0.0) {
+            if logic.phases.is_empty() || !cycle.is_finite() || cycle <= 0.0 {
                 continue;
             }
             let pos = (-logic.offset_s).rem_euclid(cycle);

@@ -597,7 +597,7 @@ pub fn resolve_traffic(
             let total: f64 = mix_spec.values().sum();
             for (name, w) in &mix_spec {
                 let t = rx.vtype(&format!("{f}.mix.{name}"), Some(name), &vtypes)?;
-                if !(w.is_finite() && *w >= 0.0) || !(total > 0.0) {
+                if !(w.is_finite() && *w >= 0.0 && total.is_finite() && total > 0.0) {
                     return Err(rx.err(
                         format!("{f}.mix.{name}"),
                         w,

@@ -516,7 +516,15 @@ impl World {
 
     /// Whether actor `id` is a background-traffic vehicle.
     pub fn is_traffic_actor(&self, id: u32) -> bool {
-        self.actor_index(id).is_some_and(|i| matches!(self.actors[i].motion, Motion::Traffic(_)))
+        self.traffic_key(id).is_some()
+    }
+
+    /// The traffic model's key of actor `id` (None unless it is a traffic vehicle).
+    pub fn traffic_key(&self, id: u32) -> Option<u64> {
+        match self.actors.get(self.actor_index(id)?)?.motion {
+            Motion::Traffic(key) => Some(key),
+            _ => None,
+        }
     }
 
     /// Removes an actor (its collider too); ids are never reused.
