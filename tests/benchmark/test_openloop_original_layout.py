@@ -318,11 +318,8 @@ def test_original_layout_scores_like_the_port(released, tmp_path: Path, capsys) 
                     port_score(scorer, obj["ground_truth"], obj["model_prediction"])[0]
                 )
     for t in saved["per_task"]:
-        assert t["mean"] == pytest.approx(
-            sum(pooled[t["task_type"]]) / len(pooled[t["task_type"]]), rel=1e-12
-        )
-    everything = [s for v in pooled.values() for s in v]
-    assert saved["overall"]["n"] == len(everything)
+        assert t["mean"] == sum(pooled[t["task_type"]]) / len(pooled[t["task_type"]])
+    assert saved["overall"]["n"] == sum(len(v) for v in pooled.values())
     assert saved["skipped_files"] == [
         {"source_file": "R1_4_Situation_Description_pred.jsonl", "reason": "skip_l1_4_flag"}
     ]
