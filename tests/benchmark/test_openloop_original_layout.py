@@ -502,3 +502,22 @@ def test_our_runner_output_reads_as_the_original_layout(openloop_data_dir: Path,
     for a, b in zip(ours["per_file"], as_original["per_file"], strict=True):
         _same(a, want[b["source_file"]])
         _same(b, want[b["source_file"]])
+
+
+def test_repeated_ids_count_in_the_original_layout_only(released, tmp_path: Path, capsys) -> None:
+    folder = _original_folder(tmp_path / "dup", {"R1_1_C": released["R1_1_C"]})
+    path = folder / "R1_1_C_State_Attribute_pred.jsonl"
+    lines = path.read_text(encoding="utf-8").splitlines()
+    path.write_text("\n".join([*lines, lines[1], lines[2]]) + "\n", encoding="utf-8")
+    assert main(["openloop", "score", str(folder)]) == 0
+    assert "2 repeated ids, each line counted" in capsys.readouterr().err
+    saved = json.loads((folder / "evaluation" / "final_score.json").read_text(encoding="utf-8"))
+    _same(saved["per_file"][0], port_folder(folder)[path.name])
+    assert saved["per_file"][0]["n"] == len(lines) + 2
+    # Under our layout a repeated id is a resume artefact: the first line wins.
+    ours = tmp_path / "ours" / "predictions"
+    ours.mkdir(parents=True)
+    shutil.copy(path, ours / "R1_1_C_State_Attribute.jsonl")
+    res = score_run(tmp_path / "ours")
+    assert res["per_file"][0]["n"] == len(lines)
+    assert res["read"]["R1_1_C_State_Attribute.jsonl"]["duplicates_skipped"] == 2

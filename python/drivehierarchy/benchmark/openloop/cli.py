@@ -157,6 +157,13 @@ def _cmd_score(args: argparse.Namespace) -> int:
                 f"(scored {f['n']}); first: {f['first_skip']}",
                 file=sys.stderr,
             )
+    for name, read in result["read"].items():
+        if read["duplicate_ids_counted"]:
+            print(
+                f"note: {name}: {read['duplicate_ids_counted']} repeated ids, each line counted "
+                "(as the original scorer does)",
+                file=sys.stderr,
+            )
     print(f"wrote {args.run_dir / 'evaluation' / 'final_score.json'}", file=sys.stderr)
     return 0
 
