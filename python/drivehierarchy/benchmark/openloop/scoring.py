@@ -24,8 +24,8 @@ path is given (else R1_4 is `skipped` with the reason; `skip_l1_4` skips it as t
 Nothing is ever a silent 0: a folder with no prediction file or no scored record, a prediction
 file of unknown task, and a file none of whose lines can be scored raise `ConfigError` naming
 the file and the first reason. An empty file (every request of that task failed) leaves its
-task unscored and listed in `skipped_files`. Lines that are skipped (invalid JSON, a line cut by a kill,
-missing fields) are counted, warned about and reported per file.
+task unscored and listed in `skipped_files`. Lines that are skipped (invalid JSON, a line cut
+by a kill, missing fields) are counted, warned about and reported per file.
 """
 
 from __future__ import annotations
