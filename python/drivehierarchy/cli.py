@@ -12,6 +12,7 @@ _AREAS = (
     "drivehierarchy.benchmark.openloop.cli",
     "drivehierarchy.benchmark.r4.cli",
     "drivehierarchy.scenario_cli",
+    "drivehierarchy.map_cli",
 )
 
 
