@@ -232,6 +232,41 @@ def project_on_polyline(
     return best[1], best[2], best[3]
 
 
+def _lane_box(lane: Any, s: float, offset: float, length: float, width: float) -> list[tuple[float, float]]:
+    """Corners of a `length` × `width` box centred at arc length `s` (extrapolated past the lane's
+    ends) and lateral `offset` of `lane`, aligned with the lane there."""
+    shape = lane.getShape()
+    total = sum(math.dist(p, q) for p, q in pairwise(shape))
+    sc = min(max(s, 0.0), total)
+    acc = 0.0
+    for (x0, y0), (x1, y1) in pairwise(shape):
+        seg = math.hypot(x1 - x0, y1 - y0)
+        if seg > 0 and (acc + seg >= sc or (x1, y1) == tuple(shape[-1])):
+            ux, uy = (x1 - x0) / seg, (y1 - y0) / seg
+            t = sc - acc + (s - sc)
+            cx, cy = x0 + ux * t - uy * offset, y0 + uy * t + ux * offset
+            break
+        acc += seg
+    else:
+        raise ValueError(f"lane {lane.getID()}: degenerate shape")
+    hl, hw = length / 2, width / 2
+    return [
+        (cx + ux * a - uy * b, cy + uy * a + ux * b) for a, b in ((hl, hw), (-hl, hw), (-hl, -hw), (hl, -hw))
+    ]
+
+
+def boxes_overlap(a: Sequence[tuple[float, float]], b: Sequence[tuple[float, float]]) -> bool:
+    """Whether two convex polygons intersect (separating-axis test)."""
+    for poly in (a, b):
+        for (x0, y0), (x1, y1) in zip(poly, [*poly[1:], poly[0]], strict=True):
+            nx, ny = y0 - y1, x1 - x0
+            pa = [nx * x + ny * y for x, y in a]
+            pb = [nx * x + ny * y for x, y in b]
+            if max(pa) < min(pb) or max(pb) < min(pa):
+                return False
+    return True
+
+
 class _Net:
     """The user's road network, read once with sumolib."""
 
@@ -482,6 +517,7 @@ class OfficialImporter:
         rep.actors_in_file = 1 + len(others)
         editor_parts = _editor_participants(editor, rep)
 
+        self._ego_box: list[tuple[float, float]] | None = None
         ego = self._ego(hero, rep, where, editor_parts.get(str(hero.get("actor_id"))))
         rep.ego = True
         actors: list[dict[str, Any]] = []
@@ -633,9 +669,11 @@ class OfficialImporter:
         if edge is None:
             raise _Unmappable(f"edge {edge_id!r} is not in the network {self.net.path.name}")
         lanes = _vclass_lanes(edge, vclass)
+        given = [ln for ln in lanes if ln.getID() == lane_id]
+        lanes = given or lanes
         if not lanes:
             raise _Unmappable(f"edge {edge_id!r} has no lane open to class {vclass}")
-        chosen = [ln for ln in lanes if ln.getID() == lane_id] or lanes
+        chosen = lanes
         best = None
         for ln in chosen:
             s, off, _ = project_on_polyline(ln.getShape(), *xy)
@@ -643,8 +681,9 @@ class OfficialImporter:
                 best = (ln, s, off)
         assert best is not None
         ln, s, off = best
-        length = self.net.lane_shape_len(ln)
-        s = min(max(s, 0.0), length)
+        # SUMO's lane length may differ from its shape's (ours checks s against the former).
+        length = min(self.net.lane_shape_len(ln), ln.getLength())
+        s = min(max(s, 0.0), math.floor(length * 1e4) / 1e4)
         return ln, s, off, abs(off)
 
     # -- actors -----------------------------------------------------------------------------
@@ -673,16 +712,25 @@ class OfficialImporter:
                 s, off = float(depart.get("lane_pos") or 0.0), 0.0
                 rep.notes.append("hero start from its depart lane and position (no reference points)")
             width = self._type_dims(hero.get("sumo_type_id"))[1] if self.vtypes else 2.0
-            # Keep the ego inside its lane: the original spawns it at the editor's point, which on
-            # the SUMO network can lie up to a lane width off the lane centre.
+            # The original spawns the ego at the editor's point. Where that point lies on the road
+            # (on any lane of the edge but a sidewalk, e.g. a narrow lane closed to cars) it is
+            # kept exactly; elsewhere (on a kerb) the ego is moved into its lane.
             max_off = max(0.0, ln.getWidth() / 2 - width / 2)
-            start_off = max(-max_off, min(max_off, off))
+            on_road = pts and self._on_road(edges[0], start_xy)
+            start_off = off if on_road else max(-max_off, min(max_off, off))
+            if on_road and abs(off) > max_off + SNAP_REPORT_M:
+                rep.notes.append(
+                    f"ego starts at the editor's point, {abs(off):.2f} m off the centre of lane "
+                    f"{ln.getID()} (on another lane of the road)"
+                )
             if abs(start_off - off) > SNAP_REPORT_M:
                 rep.notes.append(
                     f"ego start moved {abs(start_off - off):.2f} m sideways into lane {ln.getID()} "
                     f"(the editor's point is {abs(off):.2f} m off its centre)"
                 )
             start = {"lane": ln.getID(), "s": s, "offset_m": start_off}
+            elen, ewid, _eh = self._type_dims(hero.get("sumo_type_id")) if self.vtypes else (4.9, 2.0, 1.5)
+            self._ego_box = _lane_box(ln, s, start_off, elen, ewid)
             spawn = hero.get("carla_spawn") or {}
             if _f(spawn.get("yaw")) is not None and len(ln.getShape()) >= 2:
                 lane_heading = project_on_polyline(ln.getShape(), *self._lane_xy(ln, s))[2]
@@ -721,6 +769,17 @@ class OfficialImporter:
             return out
         except _Unmappable as exc:
             raise ScenarioError(f"{where}: hero: {exc}") from exc
+
+    def _on_road(self, edge_id: str, xy: tuple[float, float]) -> bool:
+        """Whether `xy` lies on a lane of the edge other than a sidewalk."""
+        edge = self.net.edge(edge_id)
+        for ln in edge.getLanes() if edge is not None else []:
+            if ln.getPermissions() <= {"pedestrian", "wheelchair"}:
+                continue
+            _s, off, _h = project_on_polyline(ln.getShape(), *xy)
+            if abs(off) <= ln.getWidth() / 2:
+                return True
+        return False
 
     def _lane_xy(self, lane: Any, s: float) -> tuple[float, float]:
         import sumolib
@@ -791,6 +850,18 @@ class OfficialImporter:
                 f"{label}: depart position {pos:.2f} m clamped to edge {edges[0]} (0 … {length:.2f} m)"
             )
             pos = min(max(pos, 0.0), length)
+        if self._ego_box is not None and isinstance(idx, int):
+            lane = lanes[idx]
+            front = pos if pos is not None else 0.0
+            vlen, vwid, _h = self._type_dims(type_id) if self.vtypes else (4.5, 1.9, 1.5)
+            box = _lane_box(lane, front - vlen / 2, 0.0, vlen, vwid)
+            if boxes_overlap(box, self._ego_box):
+                # The original's CARLA bridge spawns each vehicle SUMO inserts; CARLA refuses a
+                # spawn that collides, so this vehicle never appeared in the original's world.
+                raise _Unmappable(
+                    f"departs overlapping the ego's start ({lane.getID()} at {front:.2f} m): the "
+                    "original's CARLA spawn of it would collide and fail, so it never appeared there"
+                )
         t = _f(depart.get("time_seconds")) or 0.0
         if t != 0.0:
             rep.notes.append(
