@@ -207,25 +207,26 @@ class ImportReport:
 def project_on_polyline(
     shape: Sequence[tuple[float, float]], x: float, y: float
 ) -> tuple[float, float, float]:
-    """(arc length s, signed lateral offset > 0 = left, heading deg) of the point's projection."""
+    """(arc length s, signed lateral offset > 0 = left, heading deg) of the point on the nearest
+    segment. Past the polyline's ends s is extrapolated (< 0 or > length) and the offset stays
+    perpendicular to the end segment, so a point before a lane's start is not counted as off
+    to its side."""
     best = (math.inf, 0.0, 0.0, 0.0)
     acc = 0.0
-    for (x0, y0), (x1, y1) in pairwise(shape):
+    n = len(shape) - 1
+    for i, ((x0, y0), (x1, y1)) in enumerate(pairwise(shape)):
         dx, dy = x1 - x0, y1 - y0
         seg = math.hypot(dx, dy)
         if seg == 0.0:
             continue
-        t = max(0.0, min(1.0, ((x - x0) * dx + (y - y0) * dy) / (seg * seg)))
-        fx, fy = x0 + t * dx, y0 + t * dy
-        d = math.hypot(x - fx, y - fy)
+        u = ((x - x0) * dx + (y - y0) * dy) / (seg * seg)
+        t = max(0.0, min(1.0, u))
+        d = math.hypot(x - (x0 + t * dx), y - (y0 + t * dy))
         if d < best[0]:
-            side = dx * (y - fy) - dy * (x - fx)
-            best = (
-                d,
-                acc + t * seg,
-                math.copysign(d, side) if d > 0 else 0.0,
-                math.degrees(math.atan2(dy, dx)),
-            )
+            # Extrapolate along the first / last segment only.
+            te = u if (i == 0 and u < 0) or (i == n - 1 and u > 1) else t
+            lateral = (dx * (y - y0) - dy * (x - x0)) / seg
+            best = (d, acc + te * seg, lateral, math.degrees(math.atan2(dy, dx)))
         acc += seg
     if math.isinf(best[0]):
         raise ValueError("degenerate lane shape")

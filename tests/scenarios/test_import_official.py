@@ -320,3 +320,22 @@ def test_official_positions_match_the_reference_points(
         _core.validate_scenario(str(out / "01_pedestrian" / "SC20260319211139GNGY.toml"), sumo_home())
     )
     assert summary["actors"] == len(peds)
+
+
+def test_official_scenes_run_to_a_termination_and_the_expert_completes(
+    imported: tuple[Path, dict], tmp_path: Path
+) -> None:
+    """Each imported scene runs with its SUMO traffic to a termination; the expert reaches the
+    destination in at least 10 of the 13 (issue 9; measured 10: see docs/importing.md)."""
+    pytest.importorskip("libsumo")
+    from drivehierarchy.benchmark.r4 import runner
+
+    out, report = imported
+    results = runner.evaluate(
+        runner.suite_scenarios(str(out)), tmp_path / "run", runner.RunOptions(), log=lambda m: None
+    )
+    assert len(results) == len(report["scenes"])
+    reasons = {r["key"]: r["score"]["termination_reason"] for r in results}
+    assert all(reasons.values()), reasons
+    completed = sum(v == "destination_reached" for v in reasons.values())
+    assert completed >= 10, reasons
