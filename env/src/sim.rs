@@ -460,6 +460,11 @@ impl Sim {
         Ok(StepOutcome { observation, reward, terminated, info })
     }
 
+    /// Every decision of the running episode so far.
+    pub fn decision_log(&self) -> Result<&[DecisionRecord]> {
+        self.episode.as_ref().map(|e| e.decision_log.as_slice()).ok_or_else(not_started)
+    }
+
     /// Sets the background-traffic model used from the next `reset` on (`None`: no traffic).
     pub fn set_traffic(&mut self, model: Option<Box<dyn TrafficModel>>) {
         if let Some(ep) = self.episode.as_mut() {
@@ -487,11 +492,6 @@ impl Sim {
             self.traffic = world.detach_traffic();
         }
         res
-    }
-
-    /// Every decision of the running episode so far.
-    pub fn decision_log(&self) -> Result<&[DecisionRecord]> {
-        self.episode.as_ref().map(|e| e.decision_log.as_slice()).ok_or_else(not_started)
     }
 
     fn route_score(&self) -> f64 {

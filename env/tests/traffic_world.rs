@@ -14,10 +14,13 @@ fn scenarios() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios")
 }
 
+/// One scripted frame: the vehicles present and the changed light states.
+type ScriptFrame = (Vec<TrafficAgent>, Vec<(String, String)>);
+
 /// A model replaying a fixed script of frames (tick → agents, lights), recording its inputs.
 #[derive(Debug, Default)]
 struct Script {
-    frames: Vec<(Vec<TrafficAgent>, Vec<(String, String)>)>,
+    frames: Vec<ScriptFrame>,
     seen_ego: Vec<Pose>,
     started_with: Option<u64>,
 }

@@ -26,6 +26,9 @@ const VAR_POSITION: i32 = 0x42;
 const VAR_ANGLE: i32 = 0x43;
 const VAR_SIGNALS: i32 = 0x5b;
 const TL_RED_YELLOW_GREEN_STATE: i32 = 0x20;
+/// The ego counts as on its route within this distance of the route line (the route's edges
+/// span a few lanes either side), m.
+const EGO_ON_ROUTE_M: f64 = 5.0;
 
 #[derive(Debug, Clone, Copy)]
 struct Static {
@@ -49,7 +52,7 @@ pub struct SumoBridge {
     vehicles: HashMap<String, Static>,
     next_key: u64,
     lights: HashMap<String, String>,
-    movers: Vec<(u32, f64, f64, f64, f64)>,
+    movers: Vec<(u32, f64, f64, f64, f64, u8)>,
 }
 
 impl SumoBridge {
@@ -97,17 +100,22 @@ impl SumoBridge {
         self.demand.sumo_routes_xml(&self.map, seed, &self.ego, &self.mirrors)
     }
 
+    /// Movers for SUMO: (id, front x, front y, SUMO angle, speed, moveToXY keepRoute). The ego
+    /// near its route is mapped onto the route's edges only (keepRoute=1, several times cheaper
+    /// than SUMO's search of the whole net); elsewhere, and for the scenario's actors, onto any
+    /// lane (keepRoute=2).
     fn fill_movers(&mut self, input: &TrafficInput<'_>) {
         self.movers.clear();
-        let sumo = |id: u32, pose: Pose, length: f64, speed: f64| {
+        let sumo = |id: u32, pose: Pose, length: f64, speed: f64, keep: u8| {
             let front = pose.pos + pose.forward() * (0.5 * length);
-            (id, front.x, front.y, 90.0 - pose.yaw.to_degrees(), speed)
+            (id, front.x, front.y, 90.0 - pose.yaw.to_degrees(), speed, keep)
         };
         let e = input.ego;
-        self.movers.push(sumo(0, e.pose, e.length_m, e.speed_mps));
+        let on_route = self.ego.route.project(e.pose.pos).is_some_and(|p| p.distance <= EGO_ON_ROUTE_M);
+        self.movers.push(sumo(0, e.pose, e.length_m, e.speed_mps, if on_route { 1 } else { 2 }));
         for a in input.actors {
             if self.mirrors.binary_search_by_key(&a.id, |m| m.id).is_ok() {
-                self.movers.push(sumo(a.id, a.pose, a.length_m, a.speed_mps));
+                self.movers.push(sumo(a.id, a.pose, a.length_m, a.speed_mps, 2));
             }
         }
     }

@@ -3,9 +3,10 @@
 The Rust world calls `SumoTraffic.start` at reset and `SumoTraffic.tick` once per 0.05 s tick
 (from inside the episode's tick loop; see `python/src/traffic.rs`). Each tick:
 
-1. the ego and the mirrored scenario actors are placed with `vehicle.moveToXY` (keepRoute=2:
-   mapped onto the nearest lane, the ego keeping its route while it stays on it), so SUMO's
-   drivers follow, queue behind and yield to them;
+1. the ego and the mirrored scenario actors are placed with `vehicle.moveToXY` (the keepRoute
+   flag comes with each mover: 1 = onto the ego route's edges while the ego is near its route,
+   2 = the nearest lane anywhere, or off the network), so SUMO's drivers follow, queue behind
+   and yield to them;
 2. SUMO advances one step of 0.05 s;
 3. vehicles that departed in this step get one subscription each (position, angle, speed,
    signals) and their type's size and class are looked up once;
@@ -32,9 +33,6 @@ STEP_LENGTH_S = 0.05
 EGO_ID = "dh_ego"
 EGO_ROUTE = "dh_ego_route"
 _MIRROR = "dh_actor_{}"
-# keepRoute=2: map onto any lane (the route is kept while the mapped edge lies on it) and allow
-# positions off the network (an ego leaving the road stays where it is instead of jumping).
-_KEEP_ROUTE = 2
 
 
 def resolve_traffic_mode(config_mode: str | None, scenario_mode: str) -> str:
@@ -95,7 +93,7 @@ class SumoTraffic:
         routes_xml: str,
         seed: int,
         warmup_s: float,
-        movers: list[tuple[int, float, float, float, float]],
+        movers: list[tuple[int, float, float, float, float, int]],
         light_sync: list[tuple[str, int, float]] = (),  # type: ignore[assignment]
     ) -> tuple[dict[str, Any], list[Any], dict[str, Any]]:
         """(Re)starts SUMO for an episode; runs the warm-up; returns the t = 0 frame.
@@ -161,7 +159,7 @@ class SumoTraffic:
         return ls.vehicle.getAllSubscriptionResults(), new, lights
 
     def tick(
-        self, movers: list[tuple[int, float, float, float, float]]
+        self, movers: list[tuple[int, float, float, float, float, int]]
     ) -> tuple[dict[str, Any], list[Any], dict[str, Any]]:
         """Places the movers, steps SUMO once, returns the subscription results."""
         ls = self._ls
@@ -196,7 +194,7 @@ class SumoTraffic:
         return self._running
 
     # -- per tick -----------------------------------------------------------------------------
-    def _move(self, movers: list[tuple[int, float, float, float, float]]) -> None:
+    def _move(self, movers: list[tuple[int, float, float, float, float, int]]) -> None:
         move = self._ls.vehicle.moveToXY
         if len(movers) - 1 != len(self._mirrors):
             # A scenario actor left the world: its SUMO double leaves too.
@@ -204,15 +202,15 @@ class SumoTraffic:
             for ident in sorted(gone):
                 self._ls.vehicle.remove(_MIRROR.format(ident))
                 self._mirrors.discard(ident)
-        for ident, x, y, angle, _speed in movers:
+        for ident, x, y, angle, _speed, keep_route in movers:
             if ident == 0:
-                move(EGO_ID, "", -1, x, y, angle, _KEEP_ROUTE)
+                move(EGO_ID, "", -1, x, y, angle, keep_route)
                 continue
             vid = _MIRROR.format(ident)
             if ident not in self._mirrors:
                 self._ls.vehicle.add(vid, EGO_ROUTE, typeID=vid, depart="now")
                 self._mirrors.add(ident)
-            move(vid, "", -1, x, y, angle, _KEEP_ROUTE)
+            move(vid, "", -1, x, y, angle, keep_route)
 
     def _departed(self) -> list[tuple[str, float, float, float, str, tuple[int, ...]]]:
         ls, tc = self._ls, self._tc
