@@ -1,0 +1,167 @@
+"""CI-sized end to end (≈ 1–2 min on 2 cores): collect expert demonstrations (Minari), train BC and
+PPO through the CLI, save, resume after a kill, and score the models through `r4 evaluate`
+exactly like any other agent. The full-size targets are measured by scripts/train_baselines.py
+(docs/baselines.md)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+pytest.importorskip("minari")
+
+from drivehierarchy.agents.sb3 import Sb3Agent
+from drivehierarchy.baselines.imitation import DATASET_ID, load_demos
+from drivehierarchy.baselines.model_io import read_meta
+from drivehierarchy.baselines.wrappers import make_env
+from drivehierarchy.cli import main
+from drivehierarchy.scenarios import builtin_root
+
+INTERSECTION = builtin_root() / "r4" / "04_intersection" / "town01_straight_cross_traffic.toml"
+
+
+def cli(*args: str) -> None:
+    assert main([str(a) for a in args]) == 0
+
+
+def scores(out: Path) -> dict[str, float]:
+    lines = (out / "results.jsonl").read_text().splitlines()
+    return {json.loads(x)["key"]: json.loads(x)["score"]["score_composed"] for x in lines}
+
+
+@pytest.fixture(scope="module")
+def demos(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    data = tmp_path_factory.mktemp("demos")
+    # 14 episodes = each of the 7 training scenarios twice (once clean, once with DART noise).
+    cli("baselines", "collect", "--agent", "expert", "--suite", "builtin", "--episodes", "14", "--out", data)
+    return data
+
+
+def test_collect_writes_a_minari_dataset_with_expert_labels(demos: Path) -> None:
+    import minari
+
+    assert (demos / DATASET_ID / "data" / "main_data.hdf5").is_file()
+    os.environ["MINARI_DATASETS_PATH"] = str(demos)
+    ds = minari.load_dataset(DATASET_ID)
+    assert ds.total_episodes == 14
+    ep = next(iter(ds.iterate_episodes()))
+    assert ep.observations["state"].shape[0] == len(ep.actions) + 1
+    states, labels = load_demos(demos)
+    assert len(states) == len(labels) == ds.total_steps
+    assert labels[:, 1].max() > 5.0  # the expert drives
+    split = json.loads((demos / "split.json").read_text())
+    assert len(split["train"]) == 7 and len(split["held_out"]) == 3
+    meta = json.loads((demos / "collect.json").read_text())
+    assert meta["mean_score"] > 50.0
+
+
+def test_bc_beats_zero_speed_through_r4_evaluate(demos: Path, tmp_path: Path) -> None:
+    out = tmp_path / "bc"
+    cli("baselines", "train", "bc", "--data", demos, "--suite", "builtin", "--epochs", "40", "--out", out)
+    model = out / "model.zip"
+    meta = read_meta(model)
+    assert meta["algo"] == "ppo" and meta["trained_by"] == "bc" and meta["wrapper"]["obs"] == "state"
+    train = {
+        f"{Path(p).parent.name}__{Path(p).stem}"
+        for p in json.loads((out / "split.json").read_text())["train"]
+    }
+    cli("r4", "evaluate", "--agent", f"sb3:{model}", "--suite", "builtin", "--out", tmp_path / "ev_bc")
+    cli("r4", "evaluate", "--agent", "zero", "--suite", "builtin", "--out", tmp_path / "ev_zero")
+    bc, zero = scores(tmp_path / "ev_bc"), scores(tmp_path / "ev_zero")
+    bc_train = float(np.mean([bc[k] for k in train]))
+    zero_train = float(np.mean([zero[k] for k in train]))
+    assert bc_train > zero_train + 20.0, (bc, zero)
+    manifest = json.loads((tmp_path / "ev_bc" / "manifest.json").read_text())
+    assert manifest["agent"] == f"sb3:{model}"
+
+
+def test_the_agent_drives_exactly_like_the_training_wrappers(demos: Path, tmp_path: Path) -> None:
+    """`sb3:` through the plain env == the model on the wrapped env it was trained on."""
+    out = tmp_path / "bc"
+    cli("baselines", "train", "bc", "--data", demos, "--epochs", "5", "--out", out)
+    agent = Sb3Agent(out / "model.zip")
+    assert agent.uses_images is False
+    env = make_env([INTERSECTION], agent.wrapper, monitor=False)
+    obs, _ = env.reset(seed=0)
+    while True:
+        a, _ = agent.model.predict(obs, deterministic=True)
+        obs, _, term, trunc, _ = env.step(a)
+        if term or trunc:
+            break
+    wrapped = env.unwrapped.score()
+    cli(
+        "r4",
+        "run",
+        "--agent",
+        f"sb3:{out / 'model.zip'}",
+        "--scenario",
+        INTERSECTION,
+        "--out",
+        tmp_path / "ev",
+    )
+    via_runner = json.loads(next((tmp_path / "ev" / "scenes").glob("*/scene_score.json")).read_text())
+    for record in (via_runner, wrapped):
+        record["meta"].pop("wall_duration")  # wall-clock time, the one non-simulated field
+    assert via_runner == wrapped
+
+
+def test_ppo_trains_saves_resumes_after_a_kill_and_evaluates(tmp_path: Path) -> None:
+    out = tmp_path / "ppo"
+    args = [
+        sys.executable, "-m", "drivehierarchy.cli", "baselines", "train", "ppo", "--suite", str(INTERSECTION),
+        "--held-out", "0", "--envs", "2", "--vec", "dummy", "--checkpoint-every", "256",
+        "--hp", "n_steps=128", "--hp", "batch_size=64", "--out", str(out),
+    ]  # fmt: skip
+    proc = subprocess.Popen([*args, "--steps", "100000"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 90
+    while not list((out / "checkpoints").glob("rl_model_*_steps.zip")):
+        assert proc.poll() is None, proc.stderr.read().decode() if proc.stderr else ""
+        assert time.monotonic() < deadline, "no checkpoint within 90 s"
+        time.sleep(0.5)
+    time.sleep(1.0)  # let the checkpoint file be complete
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert not (out / "model.zip").exists()
+    done = subprocess.run(
+        [*args, "--steps", "1024"], capture_output=True, text=True, timeout=120, check=False
+    )
+    assert done.returncode == 0, done.stderr
+    assert "resuming from" in done.stderr
+    meta = read_meta(out / "model.zip")
+    assert meta["algo"] == "ppo" and meta["steps"] >= 1024
+    assert (out / "learning_curve.png").stat().st_size > 0
+    assert list((out / "tb").rglob("events.out.tfevents.*"))
+    assert list((out / "monitor").glob("*.monitor.csv"))
+    cli(
+        "r4",
+        "evaluate",
+        "--agent",
+        f"sb3:{out / 'model.zip'}",
+        "--suite",
+        INTERSECTION,
+        "--out",
+        tmp_path / "ev",
+    )
+    [score] = scores(tmp_path / "ev").values()
+    assert 0.0 <= score <= 100.0
+
+
+def test_bad_inputs_fail_with_clear_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert (
+        main(["baselines", "train", "bc", "--data", str(tmp_path / "none"), "--out", str(tmp_path / "o")])
+        == 2
+    )
+    assert "no Minari dataset" in capsys.readouterr().err
+    assert main(["baselines", "train", "bc", "--out", str(tmp_path / "o")]) == 2
+    assert "--data" in capsys.readouterr().err
+    assert main(["r4", "evaluate", "--agent", f"sb3:{tmp_path / 'x.zip'}", "--out", str(tmp_path / "e")]) == 2
+    assert "file not found" in capsys.readouterr().err
