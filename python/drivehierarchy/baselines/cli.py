@@ -49,6 +49,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     tr.add_argument("--steps", type=int, default=1_000_000, help="environment steps (ppo, sac)")
     tr.add_argument("--envs", type=int, default=8, help="parallel envs (ppo, sac)")
     tr.add_argument("--vec", default="auto", choices=["auto", "subproc", "dummy"], help="vectorisation")
+    tr.add_argument("--max-minutes", type=float, help="stop this run's learning after N minutes (ppo, sac)")
     tr.add_argument("--checkpoint-every", type=int, default=50_000, help="steps between checkpoints")
     tr.add_argument("--epochs", type=int, default=60, help="passes over the data (bc; dagger per round)")
     tr.add_argument("--iterations", type=int, default=6, help="DAgger rounds")
@@ -139,6 +140,7 @@ def _train(args: argparse.Namespace) -> int:
             vec=args.vec,
             checkpoint_every=args.checkpoint_every,
             hyperparams=_hyperparams(args.hp),
+            max_minutes=args.max_minutes,
             log=_log,
         )
         return 0

@@ -121,9 +121,12 @@ def train_rl(
     vec: str = "auto",
     checkpoint_every: int = 50_000,
     hyperparams: dict[str, Any] | None = None,
+    max_minutes: float | None = None,
     log: Any = print,
 ) -> Path:
-    from stable_baselines3.common.callbacks import CheckpointCallback
+    """Trains (or resumes) and writes OUT/model.zip. `max_minutes` stops this run's learning after
+    that much wall time (the model is saved as usual; a later run resumes from it)."""
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
 
     if steps < 1:
         raise ConfigError(f"config `steps` = {steps!r}: expected ≥ 1")
@@ -159,17 +162,43 @@ def train_rl(
             save_path=str(out / "checkpoints"),
             save_replay_buffer=(algo == "sac"),
         )
-        model.learn(total_timesteps=remaining, callback=cb, reset_num_timesteps=reset, tb_log_name=algo)
+        callbacks: list[Any] = [cb]
+        if max_minutes is not None:
+            callbacks.append(wall_clock_limit(max_minutes * 60.0))
+        model.learn(
+            total_timesteps=remaining,
+            callback=CallbackList(callbacks),
+            reset_num_timesteps=reset,
+            tb_log_name=algo,
+        )
     wall = time.perf_counter() - t0
     path = save_model(model, out / "model.zip", algo, wrapper, steps=int(model.num_timesteps))
     venv.close()
-    _append_timing(out, {"phase": "train", "algo": algo, "steps_this_run": max(0, remaining), "wall_s": wall})
+    _append_timing(
+        out,
+        {"phase": "train", "algo": algo, "total_steps": int(model.num_timesteps), "wall_s": wall},
+    )
     try:
         learning_curve(out / "monitor", out / "learning_curve.png", title=f"{algo.upper()} ({out.name})")
     except ImportError:
         log("matplotlib missing: no learning_curve.png (install the `report` extra)")
     log(f"saved {path} after {model.num_timesteps} steps ({wall:.0f} s this run)")
     return path
+
+
+def wall_clock_limit(seconds: float) -> Any:
+    """A callback ending `learn` after `seconds` of wall time (built on use: SB3 is optional)."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class WallClockLimit(BaseCallback):
+        def __init__(self) -> None:
+            super().__init__()
+            self.t0 = time.perf_counter()
+
+        def _on_step(self) -> bool:
+            return time.perf_counter() - self.t0 < seconds
+
+    return WallClockLimit()
 
 
 def write_split(
