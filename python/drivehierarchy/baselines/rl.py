@@ -182,6 +182,8 @@ def train_rl(
         learning_curve(out / "monitor", out / "learning_curve.png", title=f"{algo.upper()} ({out.name})")
     except ImportError:
         log("matplotlib missing: no learning_curve.png (install the `report` extra)")
+    except ConfigError as exc:  # e.g. a budget too short to finish one episode: the model stands
+        log(f"no learning_curve.png: {exc}")
     log(f"saved {path} after {model.num_timesteps} steps ({wall:.0f} s this run)")
     return path
 
