@@ -8,6 +8,7 @@ harness (and the same actuation bridge) as the expert and the VLMs.
 
 from __future__ import annotations
 
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -19,11 +20,12 @@ from drivehierarchy._core import ConfigError
 
 class Sb3Agent:
     def __init__(self, path: str | Path, deterministic: bool = True) -> None:
-        from drivehierarchy.baselines.model_io import load_model
         from drivehierarchy.baselines.wrappers import ActionCodec, ObsCodec
 
         self.path = Path(path)
-        self.model, self.wrapper, self.meta = load_model(self.path)
+        stat = self.path.stat() if self.path.is_file() else None
+        key = (str(self.path.resolve()), stat.st_mtime_ns if stat else 0, stat.st_size if stat else 0)
+        self.model, self.wrapper, self.meta = _load(*key)
         self.obs_codec = ObsCodec(self.wrapper)
         self.action_codec = ActionCodec(self.wrapper)
         self.deterministic = deterministic
@@ -44,3 +46,11 @@ class Sb3Agent:
         obs = self.obs_codec.encode(observation)
         action, _ = self.model.predict(obs, deterministic=self.deterministic)
         return self.action_codec.decode(action)
+
+
+@lru_cache(maxsize=8)
+def _load(path: str, mtime_ns: int, size: int) -> tuple[Any, Any, dict[str, Any]]:
+    """One load per model file (a runner builds an agent per scenario); prediction is stateless."""
+    from drivehierarchy.baselines.model_io import load_model
+
+    return load_model(Path(path))
