@@ -183,3 +183,19 @@ def test_sac_trains_and_plugs_in_as_an_agent(tmp_path: Path) -> None:
     assert (out / "checkpoints" / "rl_model_replay_buffer_200_steps.pkl").is_file()
     model = f"sb3:{out / 'model.zip'}"
     cli("r4", "run", "--agent", model, "--scenario", INTERSECTION, "--out", tmp_path / "ev")
+
+
+def test_a_bev_cnn_policy_trains_and_sees_the_protocols_bev_when_evaluated(tmp_path: Path) -> None:
+    out = tmp_path / "bev"
+    cli(
+        *("baselines", "train", "ppo", "--suite", INTERSECTION, "--held-out", "0", "--obs", "state+bev"),
+        *("--bev-size", "64", "--steps", "64", "--envs", "1", "--hp", "n_steps=64", "--hp", "batch_size=32"),
+        *("--out", out),
+    )
+    agent = Sb3Agent(out / "model.zip")
+    assert agent.uses_images is True and agent.wrapper.bev_size == 64
+    # The runner renders the protocol's 800×800 BEV for an image agent; the agent downsamples it.
+    model = f"sb3:{out / 'model.zip'}"
+    cli("r4", "run", "--agent", model, "--scenario", INTERSECTION, "--out", tmp_path / "ev")
+    record = json.loads(next((tmp_path / "ev" / "scenes").glob("*/scene_score.json")).read_text())
+    assert record["decisions"] > 0

@@ -54,6 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     tr.add_argument("--epochs", type=int, default=60, help="passes over the data (bc; dagger per round)")
     tr.add_argument("--iterations", type=int, default=6, help="DAgger rounds")
     tr.add_argument("--obs", default="state", choices=["state", "bev", "state+bev"])
+    tr.add_argument("--bev-size", type=int, default=128, help="side of the BEV image (obs bev, state+bev)")
     tr.add_argument("--action", default="decision", choices=["decision", "raw"])
     tr.add_argument("--reward", default="shaped", choices=["shaped", "score"], help="training reward")
     tr.add_argument("--max-speed", type=float, default=16.0, help="target speed at a[1] = +1 (m/s)")
@@ -123,7 +124,11 @@ def _train(args: argparse.Namespace) -> int:
     torch.set_num_threads(max(1, args.threads))
     train, held = split_from_args(args)
     wrapper = WrapperConfig(
-        action=args.action, max_speed_mps=args.max_speed, obs=args.obs, reward=args.reward
+        action=args.action,
+        max_speed_mps=args.max_speed,
+        obs=args.obs,
+        bev_size=args.bev_size,
+        reward=args.reward,
     )
     if args.algo in ("ppo", "sac"):
         from drivehierarchy.baselines.rl import train_rl
