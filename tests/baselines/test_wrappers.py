@@ -157,3 +157,39 @@ def test_registry_prefix_resolves_and_errors_clearly(tmp_path: Path) -> None:
     assert reg.create("k:3").name == "k:3"
     with pytest.raises(ValueError, match="already"):
         reg.register_prefix("k", lambda arg: runner.ConstantAgent([0.0, 0.0]))
+
+
+def test_wrapped_env_is_deterministic_for_seed_and_actions() -> None:
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-1, 1, (300, 2)).astype(np.float32)
+    runs = []
+    for _ in range(2):
+        env = make_env([PED, BRAKE], WrapperConfig(), monitor=False)
+        obs, info = env.reset(seed=11)
+        trace = [("reset", info["scenario"], obs.tobytes())]
+        for a in actions:
+            obs, r, term, trunc, info = env.step(a)
+            trace.append(("step", r, obs.tobytes()))
+            if term or trunc:
+                obs, info = env.reset()
+                trace.append(("reset", info["scenario"], obs.tobytes()))
+        runs.append(trace)
+    assert runs[0] == runs[1]
+    assert sum(t[0] == "reset" for t in runs[0]) >= 2
+
+
+def test_gymnasium_async_vector_env_runs_the_wrappers() -> None:
+    import gymnasium as gym
+
+    def make() -> gym.Env:
+        return make_env([PED, BRAKE], WrapperConfig(), monitor=False)
+
+    venv = gym.vector.AsyncVectorEnv([make, make])
+    try:
+        obs, _ = venv.reset(seed=[1, 2])
+        assert obs.shape == (2, ObsCodec(WrapperConfig()).state_dim)
+        for _ in range(50):
+            obs, rew, _, _, _ = venv.step(np.zeros((2, 2), np.float32))
+        assert np.all(np.isfinite(obs)) and rew.shape == (2,)
+    finally:
+        venv.close()
