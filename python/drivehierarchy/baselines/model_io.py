@@ -17,7 +17,12 @@ ALGOS = ("ppo", "sac")
 
 
 def algo_class(name: str) -> Any:
-    from stable_baselines3 import PPO, SAC
+    try:
+        from stable_baselines3 import PPO, SAC
+    except ImportError:
+        raise ConfigError(
+            f"config `algo` = {name!r}: Stable-Baselines3 is not installed (pip install 'drivehierarchy[rl]')"
+        ) from None
 
     classes = {"ppo": PPO, "sac": SAC}
     try:
