@@ -44,6 +44,7 @@ def main() -> None:
     ap.add_argument("--ppo-minutes", type=float, default=20.0)
     ap.add_argument("--ppo-envs", type=int, default=8)
     ap.add_argument("--dagger-iterations", type=int, default=6)
+    ap.add_argument("--sac-minutes", type=float, default=0.0, help="also train SAC for this long (0 = no)")
     ap.add_argument("--until", choices=["collect", "bc", "dagger", "ppo", "eval"], default="eval")
     a = ap.parse_args()
     order = ["collect", "bc", "dagger", "ppo", "eval"]
@@ -77,6 +78,13 @@ def main() -> None:
         *("baselines", "train", "ppo", "--suite", "builtin", "--steps", 5_000_000),
         *("--envs", a.ppo_envs, "--vec", "dummy", "--max-minutes", a.ppo_minutes, "--out", out / "ppo"),
     )
+    if a.sac_minutes > 0:
+        walls["sac"] = timed(
+            out / "sac.done",
+            run,
+            *("baselines", "train", "sac", "--suite", "builtin", "--steps", 5_000_000),
+            *("--envs", 4, "--vec", "dummy", "--max-minutes", a.sac_minutes, "--out", out / "sac"),
+        )
     if last < 4:
         return
     agents = {
@@ -87,6 +95,8 @@ def main() -> None:
         "DAgger": f"sb3:{out / 'dagger' / 'model.zip'}",
         "PPO (state)": f"sb3:{out / 'ppo' / 'model.zip'}",
     }
+    if (out / "sac" / "model.zip").exists():
+        agents["SAC (state)"] = f"sb3:{out / 'sac' / 'model.zip'}"
     split = json.loads((out / "bc" / "split.json").read_text())
     train = {f"{Path(p).parent.name}__{Path(p).stem}" for p in split["train"]}
     results: dict[str, dict[str, float]] = {}
