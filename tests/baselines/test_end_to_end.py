@@ -87,6 +87,24 @@ def test_bc_beats_zero_speed_through_r4_evaluate(demos: Path, tmp_path: Path) ->
     assert manifest["agent"] == f"sb3:{model}"
 
 
+def test_dagger_aggregates_expert_labels_of_its_own_rollouts(demos: Path, tmp_path: Path) -> None:
+    out = tmp_path / "dagger"
+    cli(
+        *("baselines", "train", "dagger", "--data", demos, "--suite", "builtin"),
+        *("--iterations", "2", "--epochs", "8", "--out", out),
+    )
+    log = [json.loads(x) for x in (out / "train_log.jsonl").read_text().splitlines()]
+    rounds = [r for r in log if r["phase"] == "dagger"]
+    assert [r["iteration"] for r in rounds] == [1, 2]
+    assert [r["beta"] for r in rounds] == [0.5, 0.25]
+    assert all(r["new_samples"] > 100 for r in rounds)
+    states, _ = load_demos(demos)
+    assert log[-1]["samples"] == len(states) + sum(r["new_samples"] for r in rounds)
+    assert read_meta(out / "model.zip")["trained_by"] == "dagger"
+    model = f"sb3:{out / 'model.zip'}"
+    cli("r4", "run", "--agent", model, "--scenario", INTERSECTION, "--out", tmp_path / "ev")
+
+
 def test_the_agent_drives_exactly_like_the_training_wrappers(demos: Path, tmp_path: Path) -> None:
     """`sb3:` through the plain env == the model on the wrapped env it was trained on."""
     out = tmp_path / "bc"

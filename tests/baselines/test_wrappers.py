@@ -193,3 +193,20 @@ def test_gymnasium_async_vector_env_runs_the_wrappers() -> None:
         assert np.all(np.isfinite(obs)) and rew.shape == (2,)
     finally:
         venv.close()
+
+
+def test_sb3_vec_envs_in_subprocesses_and_in_process() -> None:
+    from drivehierarchy.baselines.rl import make_vec_env
+
+    for vec in ("subproc", "dummy"):
+        venv = make_vec_env([PED, BRAKE], WrapperConfig(), 2, seed=5, vec=vec)
+        try:
+            obs = venv.reset()
+            assert obs.shape == (2, ObsCodec(WrapperConfig()).state_dim)
+            for _ in range(30):
+                obs, rew, _, _ = venv.step(np.zeros((2, 2), np.float32))
+            assert np.all(np.isfinite(obs)) and rew.shape == (2,)
+        finally:
+            venv.close()
+    with pytest.raises(ConfigError, match="vec"):
+        make_vec_env([PED], WrapperConfig(), 1, vec="threads")
