@@ -339,3 +339,12 @@ def test_official_scenes_run_to_a_termination_and_the_expert_completes(
     assert all(reasons.values()), reasons
     completed = sum(v == "destination_reached" for v in reasons.values())
     assert completed >= 10, reasons
+
+
+def test_import_is_deterministic(tmp_path: Path) -> None:
+    src = _crafted_scene(tmp_path)
+    texts = []
+    for name in ("a", "b"):
+        OfficialImporter(TOWN01, tmp_path / name, vtypes=tmp_path / "types.rou.xml").import_dir(src)
+        texts.append((tmp_path / name / "07_sudden_brake" / "SC_TEST.toml").read_bytes())
+    assert texts[0] == texts[1]
