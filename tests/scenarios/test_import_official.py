@@ -348,3 +348,33 @@ def test_import_is_deterministic(tmp_path: Path) -> None:
         OfficialImporter(TOWN01, tmp_path / name, vtypes=tmp_path / "types.rou.xml").import_dir(src)
         texts.append((tmp_path / name / "07_sudden_brake" / "SC_TEST.toml").read_bytes())
     assert texts[0] == texts[1]
+
+
+def test_official_start_states_match_the_reference_points(
+    imported: tuple[Path, dict], official_dir: Path
+) -> None:
+    """After reset (SUMO running) the ego stands at the hero's start point and the SUMO vehicles
+    at their start points (SUMO places a vehicle's front there; the world its centre)."""
+    pytest.importorskip("libsumo")
+    from drivehierarchy.envs.r4 import DriveHierarchyR4Env
+
+    _out, report = imported
+    scenes = official_dir / CLOSE_LOOP / "Scenario_Onsite"
+    for s in report["scenes"]:
+        data = json.loads((scenes / s["source"]).read_text(encoding="utf-8"))
+        env = DriveHierarchyR4Env(scenario=s["out"], front=None, bev=None)
+        try:
+            env.reset(seed=0)
+            ego = env.unwrapped.sim.ego_array()
+            actors = [a for a in env.unwrapped.sim.actors_array() if a[7] == 1.0]
+        finally:
+            env.close()
+        h = data["hero"]["reference_points"][0]
+        assert math.hypot(ego[0] - h["sumo_x"], ego[1] - h["sumo_y"]) < 1.6, s["source"]
+        gaps = sorted(
+            min(math.hypot(a[1] - p["sumo_x"], a[2] - p["sumo_y"]) for a in actors)
+            for v in data["background_vehicles"]
+            if v["role"] == "slave"
+            for p in v["reference_points"][:1]
+        )
+        assert gaps[len(gaps) // 2] < 3.2, (s["source"], gaps)
