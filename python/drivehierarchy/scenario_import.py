@@ -978,9 +978,18 @@ def import_official(
 ) -> ImportReport:
     """Imports every `entity_sumo.json` under `src` into `out/<category>/<scene id>.toml`."""
     out = Path(out)
-    repo_data = Path(__file__).resolve().parent
-    if out.resolve().is_relative_to(repo_data):
-        raise ConfigError(f"--out {out}: inside the installed package; the original's data stays the user's")
+    # The original's data stays the user's: never write it into the package or its checkout.
+    package = Path(__file__).resolve().parent
+    checkout = package.parents[1]
+    guarded = [package]
+    if (checkout / "pyproject.toml").is_file() and (checkout / "python" / "drivehierarchy").is_dir():
+        guarded.append(checkout)
+    for root in guarded:
+        if out.resolve().is_relative_to(root):
+            raise ConfigError(
+                f"--out {out}: inside {root} (the drivehierarchy package or its checkout); "
+                "write imported scenes to a folder of your own"
+            )
     return OfficialImporter(net, out, vtypes=vtypes, copy_net=copy_net, validate=validate).import_dir(src)
 
 

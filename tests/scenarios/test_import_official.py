@@ -378,3 +378,19 @@ def test_official_start_states_match_the_reference_points(
             for p in v["reference_points"][:1]
         )
         assert gaps[len(gaps) // 2] < 3.2, (s["source"], gaps)
+
+
+def test_out_inside_the_project_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    src = _crafted_scene(tmp_path)
+    inside = builtin_root() / "imported_by_test"
+    assert main(["scenario", "import-official", str(src), "--net", str(TOWN01), "--out", str(inside)]) == 2
+    assert "folder of your own" in capsys.readouterr().err
+    assert not inside.exists()
+
+
+def test_copy_net_makes_out_self_contained(tmp_path: Path) -> None:
+    src = _crafted_scene(tmp_path)
+    out = tmp_path / "out"
+    OfficialImporter(TOWN01, out, vtypes=tmp_path / "types.rou.xml", copy_net=True).import_dir(src)
+    doc = tomllib.loads((out / "07_sudden_brake" / "SC_TEST.toml").read_text(encoding="utf-8"))
+    assert doc["map"] == "../town01.net.xml" and (out / "town01.net.xml").is_file()
