@@ -125,19 +125,8 @@ def _show(args: argparse.Namespace) -> int:
     path = Path(resolve_scenario(args.scenario))
     summary = json.loads(_core.validate_scenario(str(path), sumo_home()))
     doc = _toml(path)
-    traffic = doc.get("traffic")
     summary["description"] = doc.get("description", "")
     summary["duration_s"] = doc.get("duration_s")
-    summary["traffic"] = (
-        None
-        if traffic is None
-        else {
-            "mode": traffic.get("mode", "sumo"),
-            "vehicles": len(traffic.get("vehicles", [])),
-            "flows": len(traffic.get("flows", [])),
-            "random": traffic.get("random"),
-        }
-    )
     summary["scripted_actors"] = [
         {"name": a.get("name"), "kind": a.get("kind"), "start": a.get("start", {"time_s": 0})}
         for a in doc.get("actors", [])
@@ -159,14 +148,7 @@ def _show(args: argparse.Namespace) -> int:
     print(f"  actors: {summary['actors']}, obstacles: {summary['obstacles']}, signs: {summary['signs']}")
     for a in summary["scripted_actors"]:
         print(f"    - {a['kind']}: {a['name'] or ''}  start {json.dumps(a['start'])}")
-    t = summary["traffic"]
-    if t is None:
-        print("  traffic: none")
-    else:
-        print(
-            f"  traffic: mode {t['mode']}, {t['vehicles']} vehicles, {t['flows']} flows"
-            + (f", random {json.dumps(t['random'])}" if t["random"] else "")
-        )
+    print(f"  traffic: {summary['traffic']}")
     return 0
 
 
