@@ -75,3 +75,44 @@ def test_import_osm_bad_file_is_a_clear_error(tmp_path: Path, capsys: pytest.Cap
     bad.write_text("not xml", encoding="utf-8")
     assert main(["map", "import-osm", str(bad), "--out", str(tmp_path / "x.net.xml")]) == 2
     assert "bad.osm" in capsys.readouterr().err
+
+
+def _cross_osm(path: Path, extra_tags: str = "") -> Path:
+    """A 300 m primary road crossed by a secondary one at a node OSM marks as signals."""
+    lat0, lon0 = 52.52, 13.40
+    dlat, dlon = 150 / 111320, 150 / (111320 * 0.6088)
+    nodes = {
+        1: (lat0, lon0 - dlon),
+        2: (lat0, lon0),
+        3: (lat0, lon0 + dlon),
+        4: (lat0 + dlat, lon0),
+        5: (lat0 - dlat, lon0),
+    }
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>', '<osm version="0.6">']
+    for i, (la, lo) in nodes.items():
+        tag = '<tag k="highway" v="traffic_signals"/>' if i == 2 else ""
+        lines.append(f'<node id="{i}" lat="{la:.7f}" lon="{lo:.7f}" version="1">{tag}</node>')
+    lines.append(
+        '<way id="10" version="1"><nd ref="1"/><nd ref="2"/><nd ref="3"/>'
+        f'<tag k="highway" v="primary"/><tag k="lanes" v="2"/>{extra_tags}</way>'
+    )
+    lines.append(
+        f'<way id="11" version="1"><nd ref="4"/><nd ref="2"/><nd ref="5"/><tag k="highway" v="secondary"/>{extra_tags}</way>'
+    )
+    lines.append("</osm>")
+    path.write_text("\n".join(lines), encoding="utf-8")
+    return path
+
+
+def test_import_osm_signalised_crossing_and_tagged_left_hand(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    osm = _cross_osm(tmp_path / "cross.osm")
+    assert main(["map", "import-osm", str(osm), "--out", str(tmp_path / "cross.net.xml"), "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["traffic_light_junctions"] == 1 and s["driving_side"] == "right"
+    assert s["probe_route"]["our_length_m"] == pytest.approx(s["probe_route"]["sumolib_length_m"], rel=0.05)
+    left = _cross_osm(tmp_path / "left.osm", '<tag k="driving_side" v="left"/>')
+    assert main(["map", "import-osm", str(left), "--out", str(tmp_path / "left.net.xml"), "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["driving_side"] == "left" and s["lefthand"]
