@@ -97,7 +97,8 @@ def _cross_osm(path: Path, extra_tags: str = "") -> Path:
         f'<tag k="highway" v="primary"/><tag k="lanes" v="2"/>{extra_tags}</way>'
     )
     lines.append(
-        f'<way id="11" version="1"><nd ref="4"/><nd ref="2"/><nd ref="5"/><tag k="highway" v="secondary"/>{extra_tags}</way>'
+        '<way id="11" version="1"><nd ref="4"/><nd ref="2"/><nd ref="5"/>'
+        f'<tag k="highway" v="secondary"/>{extra_tags}</way>'
     )
     lines.append("</osm>")
     path.write_text("\n".join(lines), encoding="utf-8")
