@@ -830,7 +830,8 @@ class OfficialImporter:
             open_idx = [i for i, ln in enumerate(lanes) if ln.allows(vclass)]
             if not open_idx:
                 raise _Unmappable(f"no lane of its first edge {edges[0]!r} is open to its class {vclass}")
-            new = min(open_idx, key=lambda i: (abs(i - idx), i))
+            want: int = idx
+            new = min(open_idx, key=lambda i: (abs(i - want), i))
             rep.notes.append(
                 f"CHANGED {label}: depart lane {lanes[idx].getID()} is closed to its class {vclass} "
                 f"(SUMO cannot insert it there): departs on {lanes[new].getID()}"
@@ -842,7 +843,7 @@ class OfficialImporter:
                 raise _Unmappable(f"route edge {e!r} has no lane open to its class {vclass}")
         for e0, e1 in pairwise(edges):
             a0, a1 = self.net.edge(e0), self.net.edge(e1)
-            if a1 not in a0.getOutgoing():
+            if a0 is not None and a1 not in a0.getOutgoing():
                 rep.notes.append(f"{label}: route gap {e0} → {e1} filled by shortest-path routing")
         pos = _f(depart.get("lane_pos"))
         length = first.getLength()
