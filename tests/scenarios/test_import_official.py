@@ -394,3 +394,15 @@ def test_copy_net_makes_out_self_contained(tmp_path: Path) -> None:
     OfficialImporter(TOWN01, out, vtypes=tmp_path / "types.rou.xml", copy_net=True).import_dir(src)
     doc = tomllib.loads((out / "07_sudden_brake" / "SC_TEST.toml").read_text(encoding="utf-8"))
     assert doc["map"] == "../town01.net.xml" and (out / "town01.net.xml").is_file()
+
+
+def test_without_a_type_file_vehicles_use_our_types(tmp_path: Path) -> None:
+    src = _crafted_scene(tmp_path)
+    report = OfficialImporter(TOWN01, tmp_path / "out").import_dir(src)
+    (scene,) = report.scenes
+    assert scene.imported and scene.validation == "ok", scene.error
+    assert report.vtypes is None
+    assert any("drawn as our 'car' (no vehicle-type file given)" in n for n in scene.notes)
+    doc = tomllib.loads((tmp_path / "out" / "07_sudden_brake" / "SC_TEST.toml").read_text(encoding="utf-8"))
+    assert "vtypes" not in doc["traffic"] and doc["traffic"]["vehicles"][0]["vtype"] == "car"
+    assert "vehicle" not in doc["ego"]
