@@ -406,3 +406,22 @@ def test_without_a_type_file_vehicles_use_our_types(tmp_path: Path) -> None:
     doc = tomllib.loads((tmp_path / "out" / "07_sudden_brake" / "SC_TEST.toml").read_text(encoding="utf-8"))
     assert "vtypes" not in doc["traffic"] and doc["traffic"]["vehicles"][0]["vtype"] == "car"
     assert "vehicle" not in doc["ego"]
+
+
+def test_official_scene_is_deterministic_with_sumo(imported: tuple[Path, dict]) -> None:
+    pytest.importorskip("libsumo")
+    from drivehierarchy.agents.base import run_episode
+    from drivehierarchy.agents.expert import ExpertAgent
+    from drivehierarchy.envs.r4 import DriveHierarchyR4Env
+
+    out, _ = imported
+    scene = out / "04_intersection" / "SC20260322015632GBSE.toml"
+    hashes = []
+    for _ in range(2):
+        env = DriveHierarchyR4Env(scenario=scene, front=None, bev=None)
+        try:
+            run_episode(env, ExpertAgent(), seed=3)
+            hashes.append(env.unwrapped.sim.trajectory_hash)
+        finally:
+            env.close()
+    assert hashes[0] == hashes[1]
