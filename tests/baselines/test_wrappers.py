@@ -210,3 +210,28 @@ def test_sb3_vec_envs_in_subprocesses_and_in_process() -> None:
             venv.close()
     with pytest.raises(ConfigError, match="vec"):
         make_vec_env([PED], WrapperConfig(), 1, vec="threads")
+
+
+def test_sumo_scenarios_share_the_process_simulation_or_get_a_process_each() -> None:
+    from drivehierarchy.baselines.rl import make_vec_env, sumo_scenarios
+
+    flow = next(p for p in builtin_scenarios() if p.parent.name == "06_traffic_flow")
+    brake = next(p for p in builtin_scenarios() if p.parent.name == "07_sudden_brake")
+    cfg = R4Config(front=None, bev=None, prompt=False)
+    # A sampler leaving a SUMO scenario gives the process's libsumo back, so another env of the
+    # same process can use it.
+    a = SuiteEnv([flow, brake], cfg, order="cycle")
+    b = SuiteEnv([flow, brake], cfg, order="cycle")
+    a.reset(seed=0)
+    a.reset(seed=1)  # a moves on to 07
+    obs, _ = b.reset(seed=0)  # b co-simulates 06 now
+    assert b.current.traffic_mode == "sumo" and np.isfinite(obs["state"]).all()
+    a.close()
+    b.close()
+    # In-process vectorisation cannot hold two SUMO simulations: a clear error, not a crash.
+    assert sumo_scenarios([str(flow), str(brake)], WrapperConfig()) == [str(flow)]
+    with pytest.raises(ConfigError, match=r"06_traffic_flow.*--vec subproc"):
+        make_vec_env([flow, brake], WrapperConfig(), 2, vec="dummy")
+    venv = make_vec_env([flow, brake], WrapperConfig(traffic="native"), 2, vec="dummy")
+    venv.reset()
+    venv.close()

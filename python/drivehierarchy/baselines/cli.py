@@ -59,6 +59,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     tr.add_argument("--reward", default="shaped", choices=["shaped", "score"], help="training reward")
     tr.add_argument("--max-speed", type=float, default=16.0, help="target speed at a[1] = +1 (m/s)")
     tr.add_argument(
+        "--traffic",
+        choices=["sumo", "native", "none"],
+        help="background traffic while training (default: each scenario's own mode)",
+    )
+    tr.add_argument(
         "--threads", type=int, default=1, help="torch threads (small MLPs: 1 is fastest on a shared box)"
     )
     tr.add_argument(
@@ -129,6 +134,7 @@ def _train(args: argparse.Namespace) -> int:
         obs=args.obs,
         bev_size=args.bev_size,
         reward=args.reward,
+        traffic=args.traffic,
     )
     if args.algo in ("ppo", "sac"):
         from drivehierarchy.baselines.rl import train_rl

@@ -48,11 +48,19 @@ def make_vec_env(
 
     if n_envs < 1:
         raise ConfigError(f"config `envs` = {n_envs!r}: expected ≥ 1")
-    if vec == "auto":
-        vec = "subproc" if n_envs >= 2 and (os.cpu_count() or 1) >= 2 else "dummy"
-    if vec not in ("subproc", "dummy"):
+    if vec not in ("auto", "subproc", "dummy"):
         raise ConfigError(f"config `vec` = {vec!r}: expected 'auto', 'subproc' or 'dummy'")
     paths = [str(p) for p in scenarios]
+    # libsumo runs one simulation per process, so envs that may co-simulate with SUMO at the same
+    # time need a process each.
+    sumo = n_envs >= 2 and sumo_scenarios(paths, wrapper)
+    if vec == "auto":
+        vec = "subproc" if n_envs >= 2 and (sumo or (os.cpu_count() or 1) >= 2) else "dummy"
+    if vec == "dummy" and sumo:
+        raise ConfigError(
+            f"config `vec` = 'dummy': {sumo[0]} runs SUMO traffic and libsumo holds one simulation "
+            "per process; use --vec subproc (one process per env) or --traffic native|none"
+        )
 
     def factory(rank: int) -> Any:
         def make() -> Any:
@@ -70,6 +78,21 @@ def make_vec_env(
     venv = SubprocVecEnv(fns, start_method="fork") if vec == "subproc" else DummyVecEnv(fns)
     venv.seed(seed)
     return venv
+
+
+def sumo_scenarios(paths: Sequence[str], wrapper: WrapperConfig) -> list[str]:
+    """The scenario files that co-simulate with SUMO under the wrapper's env settings."""
+    from drivehierarchy import _core
+    from drivehierarchy.envs.traffic import resolve_traffic_mode
+    from drivehierarchy.scenarios import sumo_home
+
+    config = wrapper.env_config()
+    out = []
+    for path in paths:
+        sim = _core.Sim(path, config.to_json(), sumo_home())
+        if resolve_traffic_mode(config.traffic, sim.scenario_traffic_mode) == "sumo":
+            out.append(path)
+    return out
 
 
 def default_hyperparams(algo: str, n_envs: int) -> dict[str, Any]:

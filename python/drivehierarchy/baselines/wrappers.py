@@ -65,6 +65,8 @@ class WrapperConfig:
     bev_size: int = 128
     reward: Literal["score", "shaped"] = "shaped"
     shaping: RewardConfig = field(default_factory=RewardConfig)
+    # Background traffic of the training envs ("sumo", "native", "none"; None = each scenario's).
+    traffic: str | None = None
 
     def __post_init__(self) -> None:
         if self.action not in ("decision", "raw"):
@@ -77,6 +79,8 @@ class WrapperConfig:
             raise ConfigError(f"config `max_speed_mps` = {self.max_speed_mps!r}: expected in (0, 30]")
         if not 16 <= int(self.bev_size) <= 800:
             raise ConfigError(f"config `bev_size` = {self.bev_size!r}: expected 16..800 pixels")
+        if self.traffic not in (None, "sumo", "native", "none"):
+            raise ConfigError(f"config `traffic` = {self.traffic!r}: expected 'sumo', 'native' or 'none'")
 
     @property
     def uses_images(self) -> bool:
@@ -110,7 +114,8 @@ class WrapperConfig:
         bev = None
         if self.uses_images:
             bev = BevConfig(size_px=self.bev_size, px_per_m=self.bev_size / PROTOCOL_BEV_SPAN_M)
-        return base.replace(action_mode=self.action, front=None, bev=bev, prompt=False)
+        traffic = self.traffic if self.traffic is not None else base.traffic
+        return base.replace(action_mode=self.action, front=None, bev=bev, prompt=False, traffic=traffic)
 
 
 # -- actions ------------------------------------------------------------------------------------
@@ -298,7 +303,10 @@ class SuiteEnv(gym.Env[dict[str, Any], np.ndarray]):
                 self._cycle += 1
             else:
                 path = self.scenarios[int(self.np_random.integers(len(self.scenarios)))]
-        self.current = self._env(str(path))
+        previous, self.current = self.current, self._env(str(path))
+        if previous is not self.current:
+            # One libsumo simulation per process: the scenario left behind gives SUMO back.
+            previous.release_traffic()
         sub_seed = int(self.np_random.integers(0, 2**31 - 1))
         obs, info = self.current.reset(seed=sub_seed, options=options)
         info = dict(info)

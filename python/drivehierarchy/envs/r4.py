@@ -204,6 +204,16 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
             self._close_traffic()
             self._sim.set_traffic(mode)
 
+    def release_traffic(self) -> None:
+        """Stops this env's SUMO simulation, if it runs one (the next `reset` starts a fresh one).
+
+        libsumo holds one simulation per process: an env that stays idle while another env of the
+        same process needs SUMO (a scenario sampler switching scenarios, an evaluation loop) must
+        release it first. The running episode cannot be stepped afterwards.
+        """
+        if self._sumo is not None:
+            self._sumo.close()
+
     def _close_traffic(self) -> None:
         if self._sumo is not None:
             self._sumo.close()
