@@ -29,8 +29,10 @@ from drivehierarchy.agents.vlm.transport import (
 )
 
 # Closed-loop decoding: the paper's deterministic protocol (T = 0, top-p 1, seed 0) and its 256-token
-# bound, which keeps a rambling model's latency bounded; a reply is two short lines.
-CLOSED_LOOP_DECODING = DecodingConfig(temperature=0.0, top_p=1.0, max_tokens=256)
+# bound, which keeps a rambling model's latency bounded (a reply is two short lines). The
+# repetition penalty is left at the server's neutral default rather than sent as 1.0, so strict
+# servers (`transformers serve`) accept the request.
+CLOSED_LOOP_DECODING = DecodingConfig(temperature=0.0, top_p=1.0, max_tokens=256, repetition_penalty=None)
 
 
 @dataclass(frozen=True)

@@ -85,12 +85,23 @@ def corrupt_image(img: np.ndarray, kind: str, seed: int) -> np.ndarray:
     raise ConfigError(f"config `corrupt` = {kind!r}: expected one of {', '.join(CORRUPTIONS)}")
 
 
-def jpeg_data_url(img: np.ndarray, quality: int = JPEG_QUALITY) -> str:
-    from PIL import Image
+def jpeg_bytes(img: np.ndarray, quality: int = JPEG_QUALITY) -> bytes:
+    """Baseline JPEG, 4:2:0 chroma. simplejpeg (libjpeg-turbo) when installed: about twice as fast
+    as Pillow, which matters at one encode pair per decision; Pillow otherwise."""
+    img = np.ascontiguousarray(img)
+    try:
+        import simplejpeg
+    except ImportError:  # pragma: no cover - simplejpeg is a dependency
+        from PIL import Image
 
-    buf = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(img)).save(buf, format="JPEG", quality=quality)
-    return "data:image/jpeg;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+        buf = io.BytesIO()
+        Image.fromarray(img).save(buf, format="JPEG", quality=quality)
+        return buf.getvalue()
+    return bytes(simplejpeg.encode_jpeg(img, quality=quality, colorspace="RGB", colorsubsampling="420"))
+
+
+def jpeg_data_url(img: np.ndarray, quality: int = JPEG_QUALITY) -> str:
+    return "data:image/jpeg;base64," + base64.b64encode(jpeg_bytes(img, quality)).decode("ascii")
 
 
 def question_text(prompt: str, decision: int) -> str:

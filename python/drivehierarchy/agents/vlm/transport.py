@@ -37,14 +37,17 @@ class DecodingConfig:
     temperature: float = 0.0
     top_p: float = 1.0
     max_tokens: int = 256
-    repetition_penalty: float = 1.0
+    # Not an OpenAI field: vLLM/SGLang read it from the body top level (the SDK's `extra_body`);
+    # None leaves it out (strict servers such as `transformers serve` reject unknown fields).
+    repetition_penalty: float | None = 1.0
     presence_penalty: float = 0.0
     seed: int = 0
 
     def payload(self) -> dict[str, Any]:
-        # repetition_penalty is not an OpenAI field; vLLM/SGLang read it from the body top level
-        # (the SDK's `extra_body`).
-        return asdict(self)
+        d = asdict(self)
+        if d["repetition_penalty"] is None:
+            del d["repetition_penalty"]
+        return d
 
     def __post_init__(self) -> None:
         if not isinstance(self.max_tokens, int) or not 1 <= self.max_tokens <= 32768:
@@ -164,7 +167,11 @@ class AsyncChatTransport:
                     max_tokens=d.max_tokens,
                     presence_penalty=d.presence_penalty,
                     seed=d.seed,
-                    extra_body={"repetition_penalty": d.repetition_penalty},
+                    extra_body=(
+                        {"repetition_penalty": d.repetition_penalty}
+                        if d.repetition_penalty is not None
+                        else None
+                    ),
                 )
             except oa.APITimeoutError as exc:
                 last = RequestTimeout(f"no reply within {self.timeout_s:g} s: {exc}", attempts=attempt)

@@ -95,7 +95,9 @@ def _vlm_options(args: argparse.Namespace) -> object | None:
         base_url=args.base_url,
         model=args.model,
         api_key_env=args.api_key_env,
-        decoding=DecodingConfig(temperature=args.temperature, max_tokens=args.max_tokens),
+        decoding=DecodingConfig(
+            temperature=args.temperature, max_tokens=args.max_tokens, repetition_penalty=None
+        ),
         payload=PayloadOptions(blind=args.blind, no_bev=args.no_bev, corrupt=args.corrupt),
         timeout_s=args.timeout,
         max_retries=args.max_retries,
