@@ -29,13 +29,14 @@ CHAT_TEMPLATE = (
 
 
 def _corpus() -> list[str]:
-    words = (
-        "steer target_speed_mps : 0.0 0.1 0.5 -0.2 1.0 5.0 8.0 the ego vehicle is driving at speed "
-        "of m/s and it wants to follow road turn left right at intersection remaining route distance "
-        "destination approximately meters local future in coordinates given as forward_m right_m "
-        "front camera image bird's-eye view q frame"
-    ).split()  # noqa: SIM905 - a sentence reads better than a list of words
-    return [" ".join(words[i:] + words[:i]) for i in range(len(words))] * 4
+    return [
+        "steer: 0.0\ntarget_speed_mps: 5.0",
+        "steer: -0.2\ntarget_speed_mps: 8.0",
+        "The ego vehicle is driving at the speed of 0.0 m/s, and it wants to follow the road.",
+        "Remaining route distance to destination is approximately 80.0 meters.",
+        "The local future route in ego coordinates is given as (forward_m, right_m): [(5.0, 0.1)].",
+        "Front camera image. Bird's-eye view image. Q(frame 1): turn left right at the intersection",
+    ] * 8
 
 
 def build(path: Path, seed: int = 0) -> Path:
