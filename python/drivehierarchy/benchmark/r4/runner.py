@@ -258,21 +258,39 @@ def write_manifest(out: Path, jobs: list[Job], opts: RunOptions) -> None:
         "started_unix": time.time(),
     }
     path = out / "manifest.json"
-    if path.exists():
-        old = json.loads(path.read_text(encoding="utf-8"))
-        old_ident = old.get("identity", {"agent": old.get("agent"), "seeds": [old.get("seed")]})
-        if old_ident != opts.identity():
-            diff = sorted(
-                k for k in set(old_ident) | set(opts.identity()) if old_ident.get(k) != opts.identity().get(k)
-            )
-            raise ConfigError(
-                f"{path}: field `{'/'.join(diff)}` = {[old_ident.get(k) for k in diff]!r}: this output "
-                f"directory belongs to another run (asked: {[opts.identity().get(k) for k in diff]!r}); "
-                "use a new --out"
-            )
+    old = check_manifest(out, opts)
+    if old is not None:
         manifest["started_unix"] = old.get("started_unix", manifest["started_unix"])
         manifest["resumed_unix"] = time.time()
     _write_json_atomic(path, manifest)
+
+
+def check_manifest(out: Path, opts: RunOptions) -> dict[str, Any] | None:
+    """The existing manifest of `out`, if any; refuses a directory of another run."""
+    path = out / "manifest.json"
+    if not path.exists():
+        return None
+    old: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
+    old_ident = old.get("identity", {"agent": old.get("agent"), "seeds": [old.get("seed")]})
+    ident = opts.identity()
+    if old_ident != ident:
+        a, b = _flatten(old_ident), _flatten(ident)
+        diff = sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k))
+        raise ConfigError(
+            f"{path}: field `{'/'.join(diff)}` = {[a.get(k) for k in diff]!r}: this output "
+            f"directory belongs to another run (asked: {[b.get(k) for k in diff]!r}); use a new --out"
+        )
+    return old
+
+
+def _flatten(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(_flatten(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
 
 
 def _fresh_scene_dir(out: Path, job: Job, frames: bool) -> Path:
@@ -569,6 +587,7 @@ async def evaluate_async(
         AGENTS.create(opts.agent)  # unknown names fail before anything is written
     out.mkdir(parents=True, exist_ok=True)
     jobs = jobs_for(scenarios, opts.seed_list())
+    check_manifest(out, opts)  # a directory of another run is refused before any request
     driver = None
     if is_vlm:
         from drivehierarchy.agents.vlm.agent import VLMDriver
