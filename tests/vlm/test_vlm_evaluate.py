@@ -3,6 +3,7 @@ held and counted failures, the batch-abort rule, resume, seeds, controls, CLI an
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import re
@@ -237,3 +238,23 @@ def test_cli_evaluate_and_report(tmp_path: Path, suite_dir: Path, capsys: pytest
     assert set(r4) == {"Qwen/Qwen3-VL-8B-Instruct", "expert"}
     assert (rep / "r4_categories.png").stat().st_size > 1000
     assert report.table_rows([("a", {"categories": {"01_x": 1.0}, "r4_score": 1.0})])[1][0]["rank"] == 1
+
+
+def test_latency_aware_holds_the_previous_control_while_the_model_thinks(tmp_path: Path) -> None:
+    with ScriptedOpenAIServer(route_driver, latency_s=0.1) as url:
+        opts = _opts(url)
+        opts.vlm = dataclasses.replace(opts.vlm, latency_aware=True)
+        (res,) = runner.evaluate(short_scenarios(1), tmp_path / "late", opts, log=print)
+        (frozen,) = runner.evaluate(short_scenarios(1), tmp_path / "frozen", _opts(url), log=print)
+    log = _lines(tmp_path / "late" / "scenes" / res["key"] / "decisions.jsonl")
+    assert all(d["held_ticks"] == round(d["latency_s"] / 0.05) >= 2 for d in log)
+    # The next question comes k + 5 ticks later: the world moved on while the model thought.
+    for a, b in itertools.pairwise(log):
+        assert b["tick"] - a["tick"] == a["held_ticks"] + 5
+    record = res["score"]
+    assert record["decisions"] == len(log) == res["vlm"]["decisions"] and record["parse_failures"] == 0
+    assert record["latency_aware"]["held_ticks"] == sum(d["held_ticks"] for d in log)
+    assert json.loads((tmp_path / "late" / "scenes" / res["key"] / "scene_score.json").read_text()) == record
+    assert record["ticks"] != frozen["score"]["ticks"]
+    manifest = json.loads((tmp_path / "late" / "manifest.json").read_text())
+    assert manifest["identity"]["vlm"]["latency_aware"] is True

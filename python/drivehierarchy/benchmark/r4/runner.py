@@ -411,51 +411,58 @@ async def drive_vlm_scene(
             front=config.front if "front" in images else None,
             bev=config.bev if "bev" in images else None,
         )
+    interval = config.decision_interval_ticks
+    if vopts.latency_aware:
+        # One env step per tick, so a decision can start late; `_step_latency_aware` keeps the
+        # decision cadence.
+        config = config.replace(decision_interval_ticks=1)
     scene_dir = _fresh_scene_dir(out, job, opts.frames)
     env = await call(DriveHierarchyR4Env, scenario=job.scenario, config=config)
     gif = _core.GifWriter(str(scene_dir / "episode.gif"), fps=4) if opts.video else None
     stats = _VlmStats()
     aborted: str | None = None
     t0 = time.perf_counter()
-    tick_s = 0.05
-    interval = config.decision_interval_ticks
     try:
         obs, info = await call(env.reset, seed=job.seed)
         with (scene_dir / "decisions.jsonl").open("w", encoding="utf-8") as dlog:
             while True:
                 stats.decisions += 1
                 n = stats.decisions
+                asked_tick = info.get("tick")
                 messages = await call(driver.messages, obs, n, job.seed)
                 reply = await driver.request(messages)
                 stats.latency_s += reply.latency_s
                 held = 0
                 if vopts.latency_aware:
-                    # The world keeps moving while the model thinks: the previous control is held
-                    # for the reply's latency (rounded to ticks, at most one interval) first.
-                    held = min(interval, round(reply.latency_s / tick_s))
+                    held = round(reply.latency_s / TICK_S)
                     stats.held_ticks += held
-                result = await call(_step_reply, env, reply.raw, held)
-                obs, _reward, terminated, truncated, info = result
-                rep = info.get("reply") or {}
+                    obs, terminated, truncated, info, rep = await call(
+                        _step_latency_aware, env, reply.raw, held, interval
+                    )
+                else:
+                    obs, _reward, terminated, truncated, info = await call(env.step, reply.raw)
+                    rep = info.get("reply") or {}
+                applied = bool(rep)  # False: the episode ended while the reply was still "in flight"
                 failure = rep.get("failure")
                 if reply.error is not None:
                     stats.transport_errors += 1
                     stats.consecutive_transport += 1
                 else:
                     stats.consecutive_transport = 0
-                    if failure is None:
+                    if applied and failure is None:
                         stats.valid += 1
-                    else:
+                    elif failure is not None:
                         stats.parse_failures += 1
                 entry = {
                     "decision": n,
-                    "tick": rep.get("tick"),
+                    "tick": rep.get("tick", asked_tick) if not vopts.latency_aware else asked_tick,
                     "raw": reply.raw,
                     "parsed": rep.get("parsed"),
                     "failure": failure,
                     "control": rep.get("control"),
                     "images": reply.images,
                     "held_ticks": held,
+                    "applied": applied,
                     **reply.log_fields(),
                 }
                 dlog.write(json.dumps(entry, sort_keys=True) + "\n")
@@ -489,16 +496,44 @@ async def drive_vlm_scene(
         _write_json_atomic(scene_dir / "aborted.json", line)
         env.close()
         return line
-    line = await call(_finish_scene, env, job, opts, scene_dir, stats.decisions, wall, {"vlm": stats.line()})
+    extra: dict[str, Any] = {"vlm": stats.line()}
+    if vopts.latency_aware:
+        extra["vlm"]["held_ticks"] = stats.held_ticks
+    line = await call(_finish_scene, env, job, opts, scene_dir, stats.decisions, wall, extra)
+    if vopts.latency_aware:
+        # The env counted every held tick as a decision without a reply; the record keeps the
+        # real decisions and failures (the episode log's end line keeps the env's counts).
+        record = line["score"]
+        record["decisions"] = stats.decisions
+        record["parse_failures"] = stats.parse_failures + stats.transport_errors
+        record["latency_aware"] = {"held_ticks": stats.held_ticks, "decision_interval_ticks": interval}
+        _write_json_atomic(scene_dir / "scene_score.json", record)
     env.close()
     return line
 
 
-def _step_reply(env: Any, raw: str | None, held_ticks: int) -> Any:
-    """One decision: optionally hold the previous control for `held_ticks` ticks first."""
-    if held_ticks > 0:
-        env.unwrapped.hold(held_ticks)
-    return env.step(raw)
+TICK_S = 0.05  # the protocol's simulation step
+
+
+def _step_latency_aware(
+    env: Any, raw: str | None, held: int, interval: int
+) -> tuple[dict[str, Any], bool, bool, dict[str, Any], dict[str, Any]]:
+    """One decision on a one-tick env: the previous control held (`None`) for `held` ticks, then
+    the reply applied and held for the decision interval. Returns (obs, terminated, truncated,
+    info, the reply step's `info["reply"]`, empty if the episode ended first)."""
+    obs: dict[str, Any] = {}
+    info: dict[str, Any] = {}
+    for _ in range(held):
+        obs, _, terminated, truncated, info = env.step(None)
+        if terminated or truncated:
+            return obs, terminated, truncated, info, {}
+    obs, _, terminated, truncated, info = env.step(raw)
+    rep = info.get("reply") or {}
+    for _ in range(interval - 1):
+        if terminated or truncated:
+            break
+        obs, _, terminated, truncated, info = env.step(None)
+    return obs, terminated, truncated, info, rep
 
 
 def _ray_scene(job: Job, opts: RunOptions, out: Path) -> dict[str, Any]:
