@@ -4,7 +4,7 @@
 //! Python's notion of `\s` (which also matches U+001C–U+001F) and `\d` (any Unicode decimal
 //! digit, which Python's `float()` accepts).
 
-use dh_env::drive::bridge::Decision;
+use dh_env::drive::bridge::{Decision, DecisionFailure};
 use regex::Regex;
 use std::sync::LazyLock;
 
@@ -37,6 +37,21 @@ pub enum ParseFailure {
     MissingTargetSpeed,
     #[error("reply has neither `steer: <number>` nor `target_speed_mps: <number>`")]
     MissingBoth,
+}
+
+impl From<ParseFailure> for DecisionFailure {
+    fn from(f: ParseFailure) -> Self {
+        match f {
+            ParseFailure::MissingSteer => DecisionFailure::MissingSteer,
+            ParseFailure::MissingTargetSpeed => DecisionFailure::MissingTargetSpeed,
+            ParseFailure::MissingBoth => DecisionFailure::MissingBoth,
+        }
+    }
+}
+
+/// Parses a reply into what the env applies: the decision, or why there is none.
+pub fn parse_for_env(text: &str) -> Result<Decision, DecisionFailure> {
+    parse_reply(text).map_err(DecisionFailure::from)
 }
 
 /// Parses a reply. The first `steer` and the first `target_speed_mps` (else `target_speed`)

@@ -318,6 +318,20 @@ impl TaskId {
             .map_err(|_| Error::UnknownTask(stem.to_string()))
     }
 
+    /// The task of a file in the original runner's result folder: exactly the names its
+    /// scorer lists, `<released stem>_pred.jsonl` or `<legacy stem>_pred.jsonl`. The original
+    /// guesses only a scorer type for other names; a task id is needed here, so they are refused.
+    pub fn from_original_file_name(name: &str) -> Result<TaskId> {
+        let unknown = || Error::UnknownTaskFile {
+            file: name.to_string(),
+            expected: "the original runner writes `<task file stem>_pred.jsonl`, e.g. \
+                       `R1_1_A_Existence_pred.jsonl` (or the legacy stems)"
+                .to_string(),
+        };
+        let base = name.strip_suffix("_pred.jsonl").ok_or_else(unknown)?;
+        TASKS.iter().find(|t| t.stem == base || t.legacy_stem == base).map(|t| t.id).ok_or_else(unknown)
+    }
+
     /// The task of a released record, from `refined_subtask_id` (`R1-1-A`; the release
     /// labels R2_1/R2_2_A/R2_2_B as `R2-1-A/B/C`), else from the id prefix.
     pub fn from_record(record: &serde_json::Value) -> Result<TaskId> {
@@ -383,6 +397,18 @@ mod tests {
             assert!((b - want).abs() < 1e-9, "{r:?} {b}");
         }
         assert!(TaskId::from_stem("R9_9_Nothing").is_err());
+        for t in TASKS.iter() {
+            assert_eq!(TaskId::from_original_file_name(&format!("{}_pred.jsonl", t.stem)).unwrap(), t.id);
+            assert_eq!(
+                TaskId::from_original_file_name(&format!("{}_pred.jsonl", t.legacy_stem)).unwrap(),
+                t.id
+            );
+            assert!(TaskId::from_original_file_name(&format!("{}.jsonl", t.stem)).is_err());
+        }
+        // Bare ids and unknown stems are not names the original runner writes.
+        let e = TaskId::from_original_file_name("R1_1_A_pred.jsonl").unwrap_err().to_string();
+        assert!(e.contains("R1_1_A_pred.jsonl") && e.contains("R1_1_A_Existence_pred.jsonl"), "{e}");
+        assert!(TaskId::from_original_file_name("R3_3_MultiAgent_Intent_pred.jsonl").is_err());
         assert_eq!(TaskId::parse("R2-2-B").unwrap(), TaskId::R2_2_B);
     }
 

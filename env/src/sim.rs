@@ -1,12 +1,18 @@
 //! One R4 episode: world + route tracker + actuation bridge + score tracker + renderers, stepped
 //! one decision at a time. This is what the Python env wraps (one coarse call per decision).
 //!
-//! Decision timing: the policy is asked at reset (t = 0) and then every
-//! `decision_interval_ticks` ticks; the control computed at a decision is held until the next.
-//! (The original runner applied zero control on ticks 1–4 and first asked at tick 5.)
+//! Decision timing, as the original runner does it: `reset` plays `warmup_ticks` (4) ticks with
+//! zero control and returns the state after them; the policy is asked then (the original's
+//! "tick 5") and after every `decision_interval_ticks` (5) ticks; the control computed at a
+//! decision is held until the next. `warmup_ticks = 0` asks at t = 0 instead.
+//!
+//! A decision is an action array, or a raw VLM reply parsed by the caller (`Action::Reply`):
+//! a reply without a usable decision, or no reply at all, holds the previous control verbatim
+//! and counts as a parse failure (§2.3). Every decision is logged (`decision_log`).
 
 use crate::drive::{
-    decision_prompt, navigation_command, ActuationBridge, Command, Control, Decision, RouteTracker, RouteView,
+    decision_prompt, navigation_command, ActuationBridge, Command, Control, Decision, DecisionFailure,
+    RouteTracker, RouteView,
 };
 use crate::geom::{wrap_angle, Pose, Vec2};
 use crate::render::{BevConfig, CameraConfig, FrameInput, Image, RenderMap};
@@ -40,6 +46,9 @@ pub enum ActionMode {
 pub struct SimConfig {
     pub action_mode: ActionMode,
     pub decision_interval_ticks: u32,
+    /// Ticks played with zero control before the first decision (the original: 4).
+    #[serde(default = "default_warmup_ticks")]
+    pub warmup_ticks: u32,
     /// Front camera of the observation; `None` = no image.
     pub front: Option<CameraConfig>,
     /// Bird's-eye view of the observation; `None` = no image.
@@ -53,11 +62,19 @@ impl Default for SimConfig {
         Self {
             action_mode: ActionMode::Decision,
             decision_interval_ticks: DECISION_INTERVAL_TICKS,
+            warmup_ticks: WARMUP_TICKS,
             front: Some(CameraConfig::default()),
             bev: Some(BevConfig::default()),
             prompt: true,
         }
     }
+}
+
+/// The original runner applies zero control on ticks 1–4 and first asks the policy at tick 5.
+pub const WARMUP_TICKS: u32 = 4;
+
+fn default_warmup_ticks() -> u32 {
+    WARMUP_TICKS
 }
 
 impl SimConfig {
@@ -92,10 +109,32 @@ pub fn json_config<T: serde::de::DeserializeOwned>(what: &str, text: &str) -> Re
 }
 
 /// An action of either mode.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum Action {
     Decision(Decision),
     Raw(Control),
+    /// A VLM reply (decision mode): `raw` as received (`None`: no reply, e.g. a transport
+    /// error) and what the reply parser made of it. A failure holds the previous control.
+    Reply {
+        raw: Option<String>,
+        parsed: std::result::Result<Decision, DecisionFailure>,
+    },
+}
+
+/// One decision of an episode, as logged.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DecisionRecord {
+    /// 1-based decision count (the `n` of the original's `Q(frame n)`).
+    pub decision: u64,
+    /// Tick after which the decision was asked for (4, 9, 14, … with the default warm-up).
+    pub tick: u64,
+    /// The raw reply, for reply actions.
+    pub raw: Option<String>,
+    /// The decision applied (for array actions, the array; `None` for raw-control actions).
+    pub parsed: Option<Decision>,
+    pub failure: Option<DecisionFailure>,
+    /// The control held until the next decision.
+    pub control: Control,
 }
 
 /// Names of the entries of [`Observation::state`], in order.
@@ -211,6 +250,10 @@ pub struct StepInfo {
     pub events: Vec<crate::score::Event>,
     /// SHA-256 over the bits of every tick's ego state and contacts so far.
     pub trajectory_hash: String,
+    /// The decision this step applied (`None` after `reset`).
+    pub reply: Option<DecisionRecord>,
+    /// Decisions whose reply had no usable decision so far.
+    pub parse_failures: u64,
 }
 
 /// A running R4 episode.
@@ -238,10 +281,15 @@ struct Episode {
     hasher: Sha256,
     control: Control,
     decisions: u64,
+    decision_log: Vec<DecisionRecord>,
+    start_on_road: bool,
     on_road: bool,
     last_route_score: f64,
     started: Instant,
     terminated: bool,
+    /// The terminal step has been returned to the caller (an episode can end during warm-up;
+    /// the first `step` then reports it without ticking).
+    terminal_reported: bool,
 }
 
 impl Sim {
@@ -283,24 +331,27 @@ impl Sim {
     pub fn route(&self) -> &crate::geom::Polyline {
         self.tracker.route()
     }
+    /// The episode has ended (possibly during the warm-up, before the caller was told).
     pub fn is_terminated(&self) -> bool {
         self.episode.as_ref().is_some_and(|e| e.terminated)
     }
 
-    /// Starts a new episode from t = 0.
+    /// Starts a new episode from t = 0 and plays the warm-up ticks with zero control.
     pub fn reset(&mut self, seed: u64) -> Result<(Observation, StepInfo)> {
         let world = World::new(&self.scenario, seed)?;
         let route = self.tracker.route().clone();
         let start = self.scenario.ego.start.pos;
+        let on_road = self.scenario.map.drivable().is_drivable(start);
         let score = ScoreTracker::new(
             route.clone(),
             start,
             self.scenario.ego.destination,
             self.scenario.reference_duration_given_s,
             self.params.clone(),
-        )?;
+        )?
+        .with_scenario_duration(Some(self.scenario.scenario_duration_s()))?
+        .with_start_on_road(on_road);
         self.route_lights = route_lights(&route, world.lights());
-        let on_road = self.scenario.map.drivable().is_drivable(start);
         self.episode = Some(Episode {
             world,
             bridge: ActuationBridge::new(),
@@ -310,101 +361,104 @@ impl Sim {
             hasher: Sha256::new(),
             control: Control::default(),
             decisions: 0,
+            decision_log: Vec::new(),
+            start_on_road: on_road,
             on_road,
             last_route_score: 0.0,
             started: Instant::now(),
             terminated: false,
+            terminal_reported: false,
         });
+        let warmup = self.config.warmup_ticks;
+        if warmup > 0 {
+            let ep = self.episode.as_mut().ok_or_else(not_started)?;
+            run_ticks(ep, Control::default(), warmup)?;
+        }
         let obs = self.observe()?;
-        let info = self.info(Vec::new())?;
+        let info = self.info(Vec::new(), None)?;
         Ok((obs, info))
     }
 
     /// Applies one action and advances `decision_interval_ticks` ticks (fewer if the episode
-    /// ends on the way).
+    /// ends on the way). If the episode ended during the warm-up, the first call reports that
+    /// end without ticking.
     pub fn step(&mut self, action: Action) -> Result<StepOutcome> {
         let mode = self.config.action_mode;
         let interval = self.config.decision_interval_ticks;
         let ep = self.episode.as_mut().ok_or_else(not_started)?;
-        if ep.terminated {
+        if ep.terminal_reported {
             return Err(Error::Simulation(
                 "the episode has ended (terminated); call reset() before step()".into(),
             ));
         }
-        let control = match (mode, action) {
-            (ActionMode::Decision, Action::Decision(d)) => {
-                check_finite("action.steer", d.steer)?;
-                check_finite("action.target_speed_mps", d.target_speed_mps)?;
-                ep.bridge.apply(Some(d), ep.world.ego().speed_mps)
-            }
-            (ActionMode::Raw, Action::Raw(c)) => {
-                check_finite("action.throttle", c.throttle)?;
-                check_finite("action.brake", c.brake)?;
-                check_finite("action.steer", c.steer)?;
-                Control {
-                    throttle: c.throttle.clamp(0.0, 1.0),
-                    brake: c.brake.clamp(0.0, 1.0),
-                    steer: c.steer.clamp(-1.0, 1.0),
-                }
-            }
-            (m, a) => {
-                return Err(Error::config(
-                    "action",
-                    format!("{a:?}"),
-                    format!("the env's action mode is {m:?}"),
-                ))
-            }
-        };
-        ep.control = control;
-        ep.decisions += 1;
         let mut step_contacts = Vec::new();
-        for _ in 0..interval {
-            let report = ep.world.tick(&control)?;
-            let contacts: Vec<Contact> =
-                report.contacts.iter().map(|&(actor_id, class)| Contact { actor_id, class }).collect();
-            let tick_input = TickInput {
-                position: report.ego.pose.pos,
-                speed_mps: report.ego.speed_mps,
-                on_road: report.on_road,
-                contacts: &contacts,
-                red_light: report.ran_red_light,
-                stop_sign: false,
-                stop: None,
+        let mut reply = None;
+        if !ep.terminated {
+            let speed = ep.world.ego().speed_mps;
+            let (control, raw, parsed, failure) = match (mode, action) {
+                (ActionMode::Decision, Action::Decision(d)) => {
+                    check_finite("action.steer", d.steer)?;
+                    check_finite("action.target_speed_mps", d.target_speed_mps)?;
+                    (ep.bridge.apply(Some(d), speed), None, Some(d), None)
+                }
+                (ActionMode::Decision, Action::Reply { raw, parsed }) => match parsed {
+                    // The parser yields finite numbers or ±∞ (which the bridge clips), never NaN.
+                    Ok(d) => (ep.bridge.apply(Some(d), speed), raw, Some(d), None),
+                    Err(f) => (ep.bridge.apply(None, speed), raw, None, Some(f)),
+                },
+                (ActionMode::Raw, Action::Raw(c)) => {
+                    check_finite("action.throttle", c.throttle)?;
+                    check_finite("action.brake", c.brake)?;
+                    check_finite("action.steer", c.steer)?;
+                    let c = Control {
+                        throttle: c.throttle.clamp(0.0, 1.0),
+                        brake: c.brake.clamp(0.0, 1.0),
+                        steer: c.steer.clamp(-1.0, 1.0),
+                    };
+                    (c, None, None, None)
+                }
+                (m, a) => {
+                    return Err(Error::config(
+                        "action",
+                        format!("{a:?}"),
+                        format!("the env's action mode is {m:?}"),
+                    ))
+                }
             };
-            let termination = ep.score.update(&tick_input);
-            hash_tick(&mut ep.hasher, &report.ego, &contacts);
-            ep.on_road = report.on_road;
-            ep.samples.push(TrajectorySample {
-                tick: report.tick,
-                time_s: report.time_s,
-                x: report.ego.pose.pos.x,
-                y: report.ego.pose.pos.y,
-                yaw: report.ego.pose.yaw,
-                speed_mps: report.ego.speed_mps,
-                on_road: report.on_road,
-                contacts: contacts.clone(),
-                red_light: report.ran_red_light,
-                stop_sign: false,
-                stop: None,
-            });
-            step_contacts.extend(contacts);
-            if termination.is_some() {
-                ep.terminated = true;
-                break;
-            }
+            ep.control = control;
+            ep.decisions += 1;
+            let record = DecisionRecord {
+                decision: ep.decisions,
+                tick: ep.world.tick_count(),
+                raw,
+                parsed,
+                failure,
+                control,
+            };
+            ep.decision_log.push(record.clone());
+            reply = Some(record);
+            step_contacts = run_ticks(ep, control, interval)?;
         }
         let route_score = self.route_score();
         let ep = self.episode.as_mut().ok_or_else(not_started)?;
-        let mut reward = (route_score - ep.last_route_score) / 100.0;
+        let previous = ep.last_route_score;
         ep.last_route_score = route_score;
         let terminated = ep.terminated;
-        if terminated {
-            let record = self.score_record()?;
-            reward += (record.score_composed - record.score_route) / 100.0;
-        }
+        ep.terminal_reported = terminated;
+        // The terminal step pays up to the (rounded) composed score, so the rewards sum to it.
+        let reward = if terminated {
+            (self.score_record()?.score_composed - previous) / 100.0
+        } else {
+            (route_score - previous) / 100.0
+        };
         let observation = self.observe()?;
-        let info = self.info(step_contacts)?;
+        let info = self.info(step_contacts, reply)?;
         Ok(StepOutcome { observation, reward, terminated, info })
+    }
+
+    /// Every decision of the running episode so far.
+    pub fn decision_log(&self) -> Result<&[DecisionRecord]> {
+        self.episode.as_ref().map(|e| e.decision_log.as_slice()).ok_or_else(not_started)
     }
 
     fn route_score(&self) -> f64 {
@@ -433,7 +487,8 @@ impl Sim {
             self.scenario.ego.destination,
             self.scenario.reference_duration_given_s,
             self.params.clone(),
-        );
+        )
+        .with_scenario(Some(self.scenario.scenario_duration_s()), ep.start_on_road);
         let mut out = String::with_capacity(128 * (ep.samples.len() + 2));
         out.push_str(&LogLine::Header(Box::new(header)).to_json());
         out.push('\n');
@@ -499,14 +554,9 @@ impl Sim {
         self.render_map.get_or_init(|| Arc::new(RenderMap::build(&self.scenario.map))).clone()
     }
 
-    /// The protocol's 8 future route points in the world frame (drawn on the BEV).
+    /// The vertices of the local route slice in the world frame (drawn on the BEV).
     fn route_points_world(&self, ego: &Pose) -> Vec<Vec2> {
-        self.tracker
-            .future_points(ego)
-            .points
-            .iter()
-            .map(|&(f, r)| ego.pos + ego.forward() * f + ego.right() * r)
-            .collect()
+        self.tracker.local_slice(ego).points().to_vec()
     }
 
     fn observe(&self) -> Result<Observation> {
@@ -522,11 +572,7 @@ impl Sim {
         let state = self.state_vector(ep, &ego, &view, command);
         let (front, bev) = if self.config.front.is_some() || self.config.bev.is_some() {
             let map = self.render_map_or_build();
-            let route_pts: Vec<Vec2> = view
-                .points
-                .iter()
-                .map(|&(f, r)| ego.pose.pos + ego.pose.forward() * f + ego.pose.right() * r)
-                .collect();
+            let route_pts = self.route_points_world(&ego.pose);
             let frame = frame_input(&ep.world, &route_pts);
             let front = match &self.config.front {
                 Some(cfg) => {
@@ -620,7 +666,7 @@ impl Sim {
         (STATE_HORIZON_M, 0.0)
     }
 
-    fn info(&self, contacts: Vec<Contact>) -> Result<StepInfo> {
+    fn info(&self, contacts: Vec<Contact>, reply: Option<DecisionRecord>) -> Result<StepInfo> {
         let ep = self.episode.as_ref().ok_or_else(not_started)?;
         let ego = ep.world.ego();
         let view = self.tracker.future_points(&ego.pose);
@@ -642,8 +688,52 @@ impl Sim {
             score_composed: if ep.terminated { Some(self.score_record()?.score_composed) } else { None },
             events: ep.score.events().to_vec(),
             trajectory_hash: hex(&ep.hasher.clone().finalize()),
+            reply,
+            parse_failures: ep.bridge.parse_failures(),
         })
     }
+}
+
+/// Advances `n` ticks with `control` held, feeding the score tracker and the log; stops at a
+/// termination. Returns the contacts of these ticks.
+fn run_ticks(ep: &mut Episode, control: Control, n: u32) -> Result<Vec<Contact>> {
+    let mut step_contacts = Vec::new();
+    for _ in 0..n {
+        let report = ep.world.tick(&control)?;
+        let contacts: Vec<Contact> =
+            report.contacts.iter().map(|&(actor_id, class)| Contact { actor_id, class }).collect();
+        let tick_input = TickInput {
+            position: report.ego.pose.pos,
+            speed_mps: report.ego.speed_mps,
+            on_road: report.on_road,
+            contacts: &contacts,
+            red_light: report.ran_red_light,
+            stop_sign: false,
+            stop: None,
+        };
+        let termination = ep.score.update(&tick_input);
+        hash_tick(&mut ep.hasher, &report.ego, &contacts);
+        ep.on_road = report.on_road;
+        ep.samples.push(TrajectorySample {
+            tick: report.tick,
+            time_s: report.time_s,
+            x: report.ego.pose.pos.x,
+            y: report.ego.pose.pos.y,
+            yaw: report.ego.pose.yaw,
+            speed_mps: report.ego.speed_mps,
+            on_road: report.on_road,
+            contacts: contacts.clone(),
+            red_light: report.ran_red_light,
+            stop_sign: false,
+            stop: None,
+        });
+        step_contacts.extend(contacts);
+        if termination.is_some() {
+            ep.terminated = true;
+            break;
+        }
+    }
+    Ok(step_contacts)
 }
 
 fn not_started() -> Error {

@@ -83,7 +83,6 @@ fn golden_scene() {
     check("chase_160x90_ss2", &img);
     render_bev(&map, &frame, &BevConfig::rl(), &mut img).unwrap();
     check("bev_128", &img);
-    render_bev(&map, &frame, &BevConfig { size_px: 128, px_per_m: 8.0, route_dots_last: 3 }, &mut img)
-        .unwrap();
+    render_bev(&map, &frame, &BevConfig { size_px: 128, px_per_m: 8.0 }, &mut img).unwrap();
     check("bev_128_8ppm", &img);
 }

@@ -200,16 +200,20 @@ fn bev_draws_route_and_ego_as_the_protocol_says() {
     let mut img = Image::default();
     render_bev(map, &frame(&e, &[], &[], &route), &BevConfig::default(), &mut img).unwrap();
     assert_eq!((img.width, img.height), (800, 800));
-    // Ego disc: yellow at the centre.
-    assert_eq!(img.pixel(400, 400).unwrap(), [255, 215, 0]);
-    // Route line red at 7.5 m ahead (8 px/m, forward = up).
-    assert_eq!(img.pixel(400, 400 - 60).unwrap(), [230, 20, 20]);
-    // Last point (40 m): white dot centre, red outline just inside its radius.
+    // Ego disc: (255, 230, 80), radius 6 with a 2 px (20, 20, 20) outline.
+    assert_eq!(img.pixel(400, 400).unwrap(), [255, 230, 80]);
+    assert_eq!(img.pixel(400 + 5, 400).unwrap(), [20, 20, 20]);
+    // Route line (255, 90, 90), 3 px wide, from the ego centre: at 1.25 m and 7.5 m ahead.
+    assert_eq!(img.pixel(400, 400 - 10).unwrap(), [255, 90, 90]);
+    assert_eq!(img.pixel(400, 400 - 60).unwrap(), [255, 90, 90]);
+    assert_eq!(img.pixel(400 + 3, 400 - 60).unwrap(), [100, 100, 106]);
+    // Every vertex: white dot with a 2 px outline, radius 4 (5 m, y = 360) …
+    assert_eq!(img.pixel(400, 360).unwrap(), [255, 255, 255]);
+    assert_eq!(img.pixel(400 + 3, 360).unwrap(), [255, 90, 90]);
+    assert_eq!(img.pixel(400 + 5, 360).unwrap(), [100, 100, 106]);
+    // … and radius 5 on the last one (40 m, y = 80).
     assert_eq!(img.pixel(400, 80).unwrap(), [255, 255, 255]);
-    assert_eq!(img.pixel(400 + 5, 80).unwrap(), [230, 20, 20]);
-    // The first point (5 m) carries no dot; nothing is drawn between the ego and it.
-    assert_eq!(img.pixel(400, 357).unwrap(), [230, 20, 20]);
-    assert_eq!(img.pixel(400, 370).unwrap(), [100, 100, 106]);
+    assert_eq!(img.pixel(400 + 4, 80).unwrap(), [255, 90, 90]);
 }
 
 #[test]
@@ -283,7 +287,7 @@ fn empty_network_renders_sky_ground_and_actors() {
     let p = project_actors(&map, &frame(&e, &actors, &[], &[]), &cfg).unwrap();
     assert_eq!(p.len(), 1);
     render_bev(&map, &frame(&e, &actors, &[], &[]), &BevConfig::rl(), &mut img).unwrap();
-    assert_eq!(img.pixel(64, 64).unwrap(), [255, 215, 0]);
+    assert_eq!(img.pixel(64, 64).unwrap(), [255, 230, 80]);
 }
 
 #[test]

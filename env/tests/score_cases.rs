@@ -2,6 +2,7 @@
 //! the comment next to it.
 
 use dh_env::geom::{Polyline, Vec2};
+use dh_env::score::record::round_to;
 use dh_env::score::*;
 use dh_env::view::ContactClass;
 
@@ -32,6 +33,11 @@ fn off(x: f64, y: f64, v: f64) -> TickInput<'static> {
     TickInput::new(Vec2::new(x, y), v, false)
 }
 
+/// Python's round(x, 6), as the original rounds every score.
+fn r6(x: f64) -> f64 {
+    round_to(x, 6)
+}
+
 fn info() -> RunInfo {
     RunInfo { scene_id: "case".into(), wall_duration_s: 1.25, decisions: 7, parse_failures: 2 }
 }
@@ -58,17 +64,23 @@ fn destination_reached_at_exactly_8_m_is_perfect() {
     let s = t.finish(&info());
     assert_eq!(s.status, Status::Perfect);
     assert_eq!(s.score_route, 100.0);
-    assert_eq!(s.meta.completed_distance, 100.0); // best = L inside the radius
-    assert_eq!(s.meta.travel_distance, 92.0);
+    assert_eq!(s.meta.completed_distance_m, 100.0); // best = L inside the radius
+    assert_eq!(s.meta.travel_distance_m, 92.0);
     // η_dist = min(1, 1.1·100/92) = 1; η_time = min(1, 1.5·20/9.2) = 1.
     assert_eq!((s.meta.distance_efficiency, s.meta.time_efficiency), (1.0, 1.0));
     assert_eq!(
         (s.score_safety, s.score_efficiency, s.score_penalty, s.score_composed),
         (1.0, 1.0, 1.0, 100.0)
     );
-    assert!(s.events.is_empty());
+    // The original records the arrival as an event without a multiplier.
+    assert_eq!(s.events.len(), 1);
+    assert_eq!(s.events[0].kind, EventKind::DestinationReached);
+    assert_eq!(s.events[0].penalty_multiplier, None);
+    assert_eq!(s.events[0].time_s, 9.2);
+    assert_eq!(s.events[0].details["destination_radius"], 8.0);
     assert_eq!((s.ticks, s.decisions, s.parse_failures), (184, 7, 2));
-    assert_eq!(s.meta.last_location, Location { x: 92.0, y: 0.0 });
+    assert_eq!(s.meta.last_location, Location { x: 92.0, y: 0.0, z: 0.0 });
+    assert_eq!(s.meta.last_route_distance_m, Some(0.0));
     // Updates after the end change nothing.
     assert_eq!(t.update(&on(50.0, 0.0, 0.0)), Some(end));
     assert_eq!(t.finish(&info()), s);
@@ -135,45 +147,53 @@ fn progress_lateral_rule_of_6_m_and_on_road_only() {
 }
 
 #[test]
-fn offroad_timeout_fires_exactly_1_5_s_after_leaving_the_road() {
+fn offroad_timeout_fires_on_the_31st_off_road_tick() {
     let mut t = tracker(Some(100.0));
-    // 10 ticks on the road, leaving it during tick 11 (last on-road sample at t = 0.5 s).
+    // 10 ticks on the road; the first off-road sample is tick 11 (t = 0.55 s).
     assert_eq!(cruise(&mut t, 10), None);
-    for k in 11..=39 {
+    for k in 11..=40 {
         assert_eq!(t.update(&off(5.0, 3.0, 2.0)), None, "tick {k}");
     }
-    // 30th consecutive off-road tick: t = 2.0 s = 0.5 s + 1.5 s.
+    // The original ends when t − t_first_offroad ≥ 1.5 s: tick 41 (2.05 s), the 31st.
     let end = t.update(&off(5.0, 3.0, 2.0)).unwrap();
-    assert_eq!((end.reason, end.tick), (TerminationReason::OffroadTimeout, 40));
-    assert_close!(end.time_s, 2.0);
+    assert_eq!((end.reason, end.tick), (TerminationReason::OffroadTimeout, 41));
+    assert_close!(end.time_s, 2.05);
     let s = t.finish(&info());
     // travel: 5 m along + √(0² + 3²) = 3 m sideways at tick 11 → 8 m.
-    assert_close!(s.meta.travel_distance, 8.0);
-    assert_close!(s.meta.offroad_time, 1.5);
-    assert_close!(s.meta.offroad_ratio, 0.75); // 1.5 / 2.0
-    assert_eq!(s.score_safety, 0.0); // penalty 0 × (1 − 0.75)
+    assert_close!(s.meta.travel_distance_m, 8.0);
+    // Intervals opened by off-road samples 11..40 = 30 × 0.05 = 1.5 s = the run's duration.
+    assert_eq!(s.meta.offroad_time_s, 1.5);
+    assert_eq!(s.meta.offroad_ratio, r6(1.5 / 2.05));
+    assert_eq!(s.meta.lane_keep_penalty, r6(1.0 - 1.5 / 2.05));
+    assert_eq!(s.score_safety, 0.0); // penalty 0 × (1 − ratio)
     assert_eq!(s.score_composed, 0.0);
     assert_eq!(s.score_route, 5.0);
     assert_eq!(s.events.len(), 1);
-    assert_eq!(s.events[0].kind, EventKind::OffroadTimeout);
-    assert_eq!(s.events[0].penalty_multiplier, 0.0);
-    assert_close!(s.events[0].time_s, 2.0);
+    // The original's event type; the termination reason stays offroad_timeout.
+    assert_eq!(s.events[0].kind, EventKind::RouteDeviation);
+    assert_eq!(s.termination_reason, TerminationReason::OffroadTimeout);
+    assert_eq!(s.events[0].penalty_multiplier, Some(0.0));
+    assert_eq!(s.events[0].details["offroad_duration"], 1.5);
+    assert_eq!(s.events[0].time_s, 2.05);
 }
 
 #[test]
 fn offroad_run_resets_when_back_on_the_road() {
     let mut t = tracker(Some(100.0));
-    for _ in 0..29 {
+    // 30 off-road ticks do not end the run (the 31st would).
+    for _ in 0..30 {
         assert_eq!(t.update(&off(0.0, 3.0, 2.0)), None);
     }
     assert_eq!(t.update(&on(0.0, 3.0, 2.0)), None);
-    for _ in 0..29 {
+    for _ in 0..30 {
         assert_eq!(t.update(&off(0.0, 3.0, 2.0)), None);
     }
     let s = t.finish(&info());
-    // 58 off-road ticks in 59: time 2.9 s of 2.95 s; no penalty event.
-    assert_close!(s.meta.offroad_time, 2.9);
-    assert_close!(s.score_safety, 1.0 - 2.9 / 2.95);
+    // An interval counts when its opening sample was off-road: samples 1..30 and 32..60
+    // (sample 61's interval has not happened) → 59 × 0.05 = 2.95 s of 3.05 s.
+    assert_close!(s.meta.offroad_time_s, 2.95);
+    assert_eq!(s.score_safety, r6(1.0 - 2.95 / 3.05));
+    assert!(s.events.is_empty());
 }
 
 #[test]
@@ -188,8 +208,11 @@ fn blocked_timeout_after_more_than_100_slow_ticks_from_t0() {
     assert_close!(end.time_s, 5.05);
     let s = t.finish(&info());
     assert_eq!(s.events[0].kind, EventKind::BlockedTimeout);
-    assert_eq!(s.events[0].penalty_multiplier, 0.7);
-    assert_eq!(s.events[0].details["blocked_ticks"], 101);
+    assert_eq!(s.events[0].penalty_multiplier, Some(0.7));
+    assert_eq!(s.events[0].details["blocked_steps"], 101);
+    assert_eq!(s.events[0].details["speed_kmh"], 0.972);
+    assert_eq!(s.events[0].details["speed_threshold_kmh"], 1.0);
+    assert_eq!(s.events[0].time_s, 5.05);
     // route 0; safety 0.7; travel 0 → η_dist = 1; η_time = min(1, 30/5.05) = 1.
     assert_eq!((s.score_route, s.score_safety, s.score_efficiency), (0.0, 0.7, 1.0));
     assert_eq!(s.score_composed, 0.0);
@@ -218,7 +241,7 @@ fn blocked_after_driving_20_m() {
     assert_eq!((end.reason, end.tick), (TerminationReason::BlockedTimeout, 141));
     let s = t.finish(&info());
     // route 20; safety 0.7; η_dist = min(1, 110/20) = 1; η_time = min(1, 30/7.05) = 1.
-    assert_close!(s.score_composed, 14.0);
+    assert_eq!(s.score_composed, 14.0);
     assert_eq!(s.status, Status::Failed);
 }
 
@@ -233,13 +256,14 @@ fn scenario_timeout_and_time_efficiency_branch() {
     // route 20; safety 0.7; η_dist = 1; η_time = 1.5·1/2 = 0.75; eff = 0.7 + 0.3·0.75 = 0.925.
     assert_eq!(s.score_route, 20.0);
     assert_eq!(s.score_safety, 0.7);
-    assert_close!(s.meta.time_efficiency, 0.75);
-    assert_close!(s.score_efficiency, 0.925);
-    assert_close!(s.score_composed, 20.0 * 0.7 * 0.925); // 12.95
-    assert_close!(s.score_penalty, 0.6475);
-    assert_eq!(s.meta.reference_duration, 1.0);
+    assert_eq!(s.meta.time_efficiency, 0.75);
+    assert_eq!(s.score_efficiency, 0.925);
+    assert_eq!(s.score_penalty, 0.6475);
+    assert_eq!(s.score_composed, 12.95); // 20 × 0.6475
+    assert_eq!(s.meta.reference_duration_s, 1.0);
     assert_eq!(s.meta.reference_duration_source, "scenario");
-    assert_eq!(s.events[0].penalty_multiplier, 0.7);
+    assert_eq!(s.events[0].penalty_multiplier, Some(0.7));
+    assert_eq!(s.events[0].details["max_sim_time"], 2.0);
 }
 
 #[test]
@@ -259,11 +283,14 @@ fn reference_duration_fallback_is_route_length_over_5_56() {
     assert_eq!((end.reason, end.tick), (TerminationReason::ScenarioTimeout, 720));
     let s = t.finish(&info());
     assert_eq!(s.meta.reference_duration_source, "fallback");
-    assert_close!(s.score_route, 36.0);
+    assert_eq!(s.score_route, 36.0);
     let eta_time = 1.5 * t_ref / 36.0; // 0.7494004796…
-    assert_close!(s.meta.time_efficiency, eta_time);
-    assert_close!(s.score_efficiency, 0.7 + 0.3 * eta_time);
-    assert_close!(s.score_composed, 36.0 * 0.7 * (0.7 + 0.3 * eta_time));
+    assert_eq!(s.meta.time_efficiency, r6(eta_time));
+    let eff = r6(0.7 + 0.3 * eta_time);
+    assert_eq!(s.score_efficiency, eff);
+    // Composed from the rounded terms, as the original does.
+    assert_eq!(s.score_penalty, r6(0.7 * eff));
+    assert_eq!(s.score_composed, r6(36.0 * r6(0.7 * eff)));
 }
 
 #[test]
@@ -281,12 +308,12 @@ fn distance_efficiency_branch_and_completed_status() {
     assert_eq!((end.reason, end.tick), (TerminationReason::DestinationReached, 152));
     let s = t.finish(&info());
     // travel 60 + 92 = 152; η_dist = 110/152; duration 7.6 s; η_time = 6/7.6.
-    assert_eq!(s.meta.travel_distance, 152.0);
-    assert_close!(s.meta.distance_efficiency, 110.0 / 152.0);
-    assert_close!(s.meta.time_efficiency, 6.0 / 7.6);
-    let eff = 0.7 * 110.0 / 152.0 + 0.3 * 6.0 / 7.6; // 0.743421052631579
-    assert_close!(s.score_efficiency, eff);
-    assert_close!(s.score_composed, 100.0 * eff);
+    assert_eq!(s.meta.travel_distance_m, 152.0);
+    assert_eq!(s.meta.distance_efficiency, r6(110.0 / 152.0));
+    assert_eq!(s.meta.time_efficiency, r6(6.0 / 7.6));
+    let eff = r6(0.7 * (100.0 * 1.1) / 152.0 + 0.3 * (4.0 * 1.5) / 7.6); // 0.743421
+    assert_eq!(s.score_efficiency, eff);
+    assert_eq!(s.score_composed, r6(100.0 * eff));
     assert_eq!(s.status, Status::Completed);
     assert_eq!(s.score_safety, 1.0);
 }
@@ -310,9 +337,14 @@ fn every_collision_class() {
         let s = t.finish(&info());
         assert_eq!(s.events.len(), 1);
         let e = &s.events[0];
-        assert_eq!(e.penalty_multiplier, penalty);
+        assert_eq!(e.penalty_multiplier, Some(penalty));
         assert_eq!(e.details["other_actor_id"], 42);
-        assert_close!(e.time_s, 0.5);
+        // A CARLA type id whose prefix the original's classifier maps back to the class.
+        let other = e.details["other_actor"].as_str().unwrap();
+        let prefix = ["walker.", "vehicle.", "static."][class as usize];
+        assert!(other.starts_with(prefix), "{other}");
+        assert_eq!(e.details["intensity"], 15000.0); // 1500 kg × 10 m/s
+        assert_eq!(e.time_s, 0.5);
         // route 5; safety = penalty; η = 1 → composed = 5·penalty (0, 1.0, 1.5).
         assert_eq!(s.score_route, 5.0);
         assert_close!(s.score_composed, 5.0 * penalty);
@@ -348,9 +380,9 @@ fn termination_order_within_one_tick() {
     // travel 95 → η_dist = 1; duration 0.05 → η_time = 1 → composed = 100 · 0.2.
     assert_close!(s.score_composed, 20.0);
 
-    // Off-road timeout beats destination: 29 off-road ticks, then the 30th inside the radius.
+    // Off-road timeout beats destination: 30 off-road ticks, then the 31st inside the radius.
     let mut t = tracker(Some(20.0));
-    for _ in 0..29 {
+    for _ in 0..30 {
         assert_eq!(t.update(&off(80.0, 10.0, 5.0)), None);
     }
     assert_eq!(t.update(&off(95.0, 1.0, 5.0)).unwrap().reason, TerminationReason::OffroadTimeout);
@@ -402,8 +434,9 @@ fn manual_interrupt_and_system_error() {
     let end = t.update(&on(f64::NAN, 0.0, 3.0)).unwrap();
     assert_eq!((end.reason, end.tick), (TerminationReason::SystemError, 5));
     let s = t.finish(&info());
-    assert_eq!(s.meta.travel_distance, 2.0); // the NaN sample is not accumulated
-    assert_eq!(s.events[0].penalty_multiplier, 0.0);
+    assert_eq!(s.meta.travel_distance_m, 2.0); // the NaN sample is not accumulated
+    assert_eq!(s.events[0].penalty_multiplier, Some(0.0));
+    assert!(s.events[0].details["error"].is_string());
 }
 
 #[test]
@@ -426,11 +459,11 @@ fn traffic_rule_infractions_only_count_in_the_carla_dialect() {
     }
     let s = t.finish(&info());
     assert_eq!(s.termination_reason, TerminationReason::DestinationReached);
-    assert_eq!(s.events.len(), 2);
+    assert_eq!(s.events.len(), 3); // red light, stop sign, destination reached
     assert_eq!(s.meta.penalty_product, 1.0);
-    // Protocol: route 100, safety = 1 − 10/184 (off-road ticks / ticks).
+    // Protocol: route 100, safety = 1 − 10/184 (off-road intervals / ticks).
     assert_eq!(s.ticks, 184);
-    assert_close!(s.score_safety, 1.0 - 0.5 / 9.2);
+    assert_eq!(s.score_safety, r6(1.0 - 0.5 / 9.2));
     assert_eq!(s.status, Status::Completed);
     // CARLA: 100 × 0.7 × 0.8 × (1 − 5/92).
     let c = &s.dialects.carla;
@@ -490,29 +523,84 @@ fn record_has_the_original_fields() {
     let e = &v["events"][0];
     assert_eq!(e["type"], "collision_static");
     assert_eq!(e["penalty_multiplier"], 0.3);
-    assert!(e["time"].is_f64());
+    assert_eq!(e["time"], 0.5);
+    for key in ["other_actor", "intensity"] {
+        assert!(e.get(key).is_some(), "event key {key}");
+    }
     let mut meta: Vec<&str> = v["meta"].as_object().unwrap().keys().map(|k| k.as_str()).collect();
     meta.sort_unstable();
+    // The original's meta keys, then ours.
     let mut want_meta = vec![
-        "route_length",
-        "completed_distance",
-        "travel_distance",
-        "offroad_time",
+        "route_source",
+        "route_length_m",
+        "completed_distance_m",
+        "travel_distance_m",
+        "offroad_time_s",
         "offroad_ratio",
-        "sim_duration",
-        "wall_duration",
-        "reference_duration",
-        "reference_duration_source",
+        "lane_keep_penalty",
+        "duration_game",
+        "duration_system",
+        "reference_duration_s",
         "distance_efficiency",
         "time_efficiency",
         "destination_radius",
+        "last_route_distance_m",
         "last_location",
+        "reference_duration_source",
+        "scenario_duration_s",
+        "max_sim_time_s",
         "penalty_product",
     ];
     want_meta.sort_unstable();
     assert_eq!(meta, want_meta);
     assert_eq!(v["meta"]["destination_radius"], 8.0);
-    assert_eq!(v["meta"]["wall_duration"], 1.25);
+    assert_eq!(v["meta"]["duration_system"], 1.25);
+    assert_eq!(v["meta"]["route_source"], "route_edges");
+    assert_eq!(v["meta"]["last_location"], serde_json::json!({"x": 5.0, "y": 0.0, "z": 0.0}));
     let back: SceneScore = serde_json::from_value(v).unwrap();
     assert_eq!(back, t.finish(&info()));
+}
+
+#[test]
+fn scenario_timeout_uses_the_scenario_duration_not_t_ref() {
+    // T_ref = 1 s feeds the efficiency term; the scenario lasts 3 s, so the limit is 6 s
+    // (tick 120), not 2 × T_ref = 2 s.
+    let mut t = tracker(Some(1.0)).with_scenario_duration(Some(3.0)).unwrap();
+    for k in 1..120u64 {
+        assert_eq!(t.update(&on(k as f64 * 0.05, 0.0, 1.0)), None, "tick {k}");
+    }
+    let end = t.update(&on(6.0, 0.0, 1.0)).unwrap();
+    assert_eq!((end.reason, end.tick), (TerminationReason::ScenarioTimeout, 120));
+    let s = t.finish(&info());
+    assert_eq!(s.events[0].details["max_sim_time"], 6.0);
+    assert_eq!((s.meta.scenario_duration_s, s.meta.max_sim_time_s), (3.0, 6.0));
+    assert_eq!(s.meta.reference_duration_s, 1.0);
+    assert_eq!(s.meta.time_efficiency, r6(1.5 / 6.0));
+    let bad = tracker(Some(1.0)).with_scenario_duration(Some(f64::NAN));
+    assert!(bad.unwrap_err().to_string().contains("scenario_duration_s"));
+}
+
+#[test]
+fn status_follows_the_original_thresholds() {
+    // Safety 1 and efficiency ≥ 0.999999 after rounding → Perfect; a hair lower → Completed.
+    let route = Polyline::new(vec![Vec2::new(0.0, 0.0), Vec2::new(100.0, 0.0)]);
+    let p = ScoreParams::default();
+    let run = |travel_extra: f64| {
+        let mut t =
+            ScoreTracker::new(route.clone(), Vec2::ZERO, Vec2::new(100.0, 0.0), Some(100.0), p.clone())
+                .unwrap();
+        // A sideways hop adds travel; then straight on to the destination.
+        t.update(&on(0.0, travel_extra, 10.0));
+        let mut k = 0;
+        while t.termination().is_none() {
+            k += 1;
+            t.update(&on(k as f64, 0.0, 10.0));
+        }
+        t.finish(&info())
+    };
+    // Travel h + √(1 + h²) + 91 must exceed 110 for the distance term to drop below 1.
+    assert_eq!(run(1.0).status, Status::Perfect);
+    let s = run(10.0); // travel ≈ 111.05 → η_dist ≈ 0.9905
+    assert_eq!(s.status, Status::Completed);
+    assert!(s.score_efficiency < 0.999999);
 }

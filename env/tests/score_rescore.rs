@@ -90,7 +90,7 @@ fn rescore_equals_live_score() {
     }
     let (live, _) = live_run(None, None);
     assert!(live.ticks > 100, "the wobbly run should last a while: {}", live.ticks);
-    assert!(live.meta.offroad_time > 0.0);
+    assert!(live.meta.offroad_time_s > 0.0);
     let (live, _) = live_run(Some(150), None);
     assert_eq!(live.termination_reason, TerminationReason::CollisionVehicle);
     let (live, _) = live_run(None, Some(60));

@@ -46,7 +46,7 @@ fn same_seed_and_actions_give_identical_episodes() {
     // Rendering does not change the trajectory.
     let small = SimConfig {
         front: Some(dh_env::render::CameraConfig { width: 96, height: 54, ..Default::default() }),
-        bev: Some(dh_env::render::BevConfig { size_px: 64, px_per_m: 2.0, route_dots_last: 3 }),
+        bev: Some(dh_env::render::BevConfig { size_px: 64, px_per_m: 2.0 }),
         ..SimConfig::default()
     };
     assert_eq!(drive(small).0, a.0);
@@ -62,7 +62,14 @@ fn observation_has_state_prompt_and_images_as_configured() {
     let bev = obs.bev.expect("bev image");
     assert_eq!((bev.width, bev.height), (800, 800));
     assert!(obs.prompt.contains("Remaining route distance to destination is approximately"));
-    assert_eq!(info.tick, 0);
+    // The original's warm-up: zero control on ticks 1–4, first decision with the state after tick 4.
+    assert_eq!(info.tick, 4);
+    assert_eq!(info.decision, 0);
+    let mut s =
+        sim("03_turning/town01_right_turn_signalised.toml", SimConfig { warmup_ticks: 0, ..no_images() });
+    assert_eq!(s.reset(0).unwrap().1.tick, 0);
+    let out = s.step(Action::Decision(Decision { steer: 0.0, target_speed_mps: 5.0 })).unwrap();
+    assert_eq!((out.info.tick, out.info.decision), (5, 1));
 }
 
 #[test]
@@ -127,4 +134,86 @@ fn the_run_log_rescores_to_the_live_record() {
     assert_eq!(again.score_composed.to_bits(), live.score_composed.to_bits());
     assert_eq!(again.events, live.events);
     assert_eq!(again.termination_reason, live.termination_reason);
+}
+
+#[test]
+fn a_failed_reply_holds_the_previous_control_verbatim() {
+    use dh_env::drive::{Control, DecisionFailure};
+    let ok = |raw: &str, steer: f64, target: f64| Action::Reply {
+        raw: Some(raw.into()),
+        parsed: Ok(Decision { steer, target_speed_mps: target }),
+    };
+    let scenario = "07_sudden_brake/town01_lead_brakes.toml";
+    let mut s = sim(scenario, no_images());
+    s.reset(0).unwrap();
+    let first = s.step(ok("steer: 0.3\ntarget_speed_mps: 6", 0.3, 6.0)).unwrap();
+    let held = first.info.control;
+    assert_eq!(held.steer, 0.12); // rate-limited from 0
+    let bad =
+        Action::Reply { raw: Some("I would slow down.".into()), parsed: Err(DecisionFailure::MissingBoth) };
+    let second = s.step(bad).unwrap();
+    assert_eq!(second.info.control, held, "the control is held verbatim");
+    assert_eq!(second.info.parse_failures, 1);
+    let r = second.info.reply.as_ref().unwrap();
+    assert_eq!((r.decision, r.tick, r.failure), (2, 9, Some(DecisionFailure::MissingBoth)));
+    assert_eq!(r.raw.as_deref(), Some("I would slow down."));
+    assert_eq!(r.parsed, None);
+    // No reply at all (a transport error) is held and counted the same way.
+    let none = Action::Reply { raw: None, parsed: Err(DecisionFailure::NoReply) };
+    assert_eq!(s.step(none).unwrap().info.control, held);
+    // The next valid reply rate-limits from the last *valid* steer (0.12), not from a failure.
+    let next = s.step(ok("steer: 1", 1.0, 6.0)).unwrap();
+    assert!((next.info.control.steer - 0.24).abs() < 1e-12);
+    assert_eq!(s.score_record().unwrap().parse_failures, 2);
+    let log = s.decision_log().unwrap();
+    assert_eq!(log.len(), 4);
+    assert_eq!(log.iter().map(|d| d.tick).collect::<Vec<_>>(), vec![4, 9, 14, 19]);
+
+    // The ticks after the failure ran with exactly the held control: a raw-mode run applying
+    // it twice has the same trajectory.
+    let mut raw = sim(scenario, SimConfig { action_mode: ActionMode::Raw, ..no_images() });
+    raw.reset(0).unwrap();
+    let c = Control { ..held };
+    raw.step(Action::Raw(c)).unwrap();
+    let raw_second = raw.step(Action::Raw(c)).unwrap();
+    assert_eq!(raw_second.info.trajectory_hash, second.info.trajectory_hash);
+}
+
+#[test]
+fn scenario_duration_sets_the_timeout_and_defaults_to_the_longest_actor() {
+    // Default: the longest estimated duration over the actors, at least T_ref.
+    let s = sim("07_sudden_brake/town01_lead_brakes.toml", no_images());
+    let sc = s.scenario();
+    assert_eq!(sc.duration_given_s, None);
+    assert!(sc.scenario_duration_s() >= sc.reference_duration_s());
+
+    // Given: `duration_s` is the scenario duration; T_ref stays the efficiency reference.
+    let text = std::fs::read_to_string(scenario("07_sudden_brake/town01_lead_brakes.toml")).unwrap();
+    let map = scenario("../maps/town01/town01.net.xml").canonicalize().unwrap();
+    let text = text
+        .replace("map = \"../../maps/town01/town01.net.xml\"", &format!("map = {:?}\nduration_s = 12.5", map))
+        .replace("reference_duration_s = 44.0", "reference_duration_s = 5.0");
+    let dir = std::env::temp_dir().join(format!("dh-duration-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("short.toml");
+    std::fs::write(&path, text).unwrap();
+    let mut s = Sim::new(&path, no_images(), &LoadOptions::default()).unwrap();
+    assert_eq!(s.scenario().scenario_duration_s(), 12.5);
+    s.reset(0).unwrap();
+    // Creep at 2 m/s so neither the blocked timeout nor the destination ends it first.
+    let mut end = None;
+    for _ in 0..200 {
+        let out = s.step(Action::Decision(Decision { steer: 0.0, target_speed_mps: 2.0 })).unwrap();
+        if out.terminated {
+            end = Some(out.info);
+            break;
+        }
+    }
+    let info = end.expect("terminates");
+    assert_eq!(info.termination_reason.as_deref(), Some("scenario_timeout"));
+    assert_eq!(info.tick, 500); // 2 × 12.5 s, not 2 × T_ref = 10 s
+    let rec = s.score_record().unwrap();
+    assert_eq!((rec.meta.scenario_duration_s, rec.meta.max_sim_time_s), (12.5, 25.0));
+    assert_eq!(rec.meta.reference_duration_s, 5.0);
+    std::fs::remove_dir_all(&dir).ok();
 }

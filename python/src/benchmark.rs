@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use dh_benchmark::aggregate::{self, TaskOutcome};
 use dh_benchmark::calibrate::{self, CalibrationParams};
-use dh_benchmark::predictions;
+use dh_benchmark::predictions::{self, Layout};
 use dh_benchmark::pyjson::PyValue;
 use dh_benchmark::{Rank, ScoreOptions, TaskId, TASKS};
 use pyo3::exceptions::PyOSError;
@@ -133,21 +133,27 @@ fn openloop_score_task(
     res.map_err(|m| config_error(py, m))
 }
 
-/// Reads and scores one predictions file (task from `task_id` or the file stem).
-/// Returns a dict: task, ids, scores, parsed, judge_items [(question, answer, prediction)]
-/// for R1_4, models, duplicates, issues [(line, message)], truncated_tail.
+/// Reads and scores one predictions file of a folder of `layout` (`"drivehierarchy"`:
+/// `predictions/<stem>.jsonl`; `"original"`: the original runner's `<stem>_pred.jsonl`); the
+/// task from `task_id` or the file name. Returns a dict: task, ids (None for an original line
+/// without id), scores, parsed, judge_items [(question, answer, prediction)] for R1_4, models,
+/// formats, lines, duplicates (skipped), duplicate_ids (counted), issues [(line, message)]
+/// (skipped lines), truncated_tail. A file with nothing to score raises ConfigError.
 #[pyfunction]
-#[pyo3(signature = (path, task_id = None, strict_order = false))]
+#[pyo3(signature = (path, task_id = None, strict_order = false, layout = "drivehierarchy"))]
 fn openloop_score_file<'py>(
     py: Python<'py>,
     path: PathBuf,
     task_id: Option<&str>,
     strict_order: bool,
+    layout: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
     let task = task_id.map(|t| task_of(py, t)).transpose()?;
+    let layout = Layout::parse(layout).map_err(|e| to_pyerr(py, e))?;
     let opts = options(strict_order);
-    let scored =
-        py.detach(|| predictions::score_predictions_file(&path, task, &opts)).map_err(|e| to_pyerr(py, e))?;
+    let scored = py
+        .detach(|| predictions::score_predictions_file(&path, task, layout, &opts))
+        .map_err(|e| to_pyerr(py, e))?;
     let d = PyDict::new(py);
     d.set_item("task", scored.task.as_str())?;
     d.set_item("ids", scored.ids)?;
@@ -157,11 +163,21 @@ fn openloop_score_file<'py>(
         scored.judge_items.into_iter().map(|j| (j.question, j.answer, j.prediction)).collect();
     d.set_item("judge_items", items)?;
     d.set_item("models", scored.models.into_iter().collect::<Vec<_>>())?;
+    d.set_item("formats", scored.formats.iter().map(|f| f.as_str()).collect::<Vec<_>>())?;
+    d.set_item("lines", scored.lines)?;
     d.set_item("duplicates", scored.duplicates)?;
+    d.set_item("duplicate_ids", scored.duplicate_ids)?;
     let issues: Vec<(usize, String)> = scored.issues.into_iter().map(|i| (i.line, i.message)).collect();
     d.set_item("issues", issues)?;
     d.set_item("truncated_tail", scored.truncated_tail)?;
     Ok(d)
+}
+
+/// Task id of a file of the original runner's result folder (`<stem>_pred.jsonl`, its exact
+/// names only); ConfigError naming the file otherwise.
+#[pyfunction]
+fn openloop_task_from_original_file(py: Python<'_>, name: &str) -> PyResult<&'static str> {
+    TaskId::from_original_file_name(name).map(TaskId::as_str).map_err(|e| to_pyerr(py, e))
 }
 
 fn weights_of(py: Python<'_>, w: Option<BTreeMap<String, f64>>) -> PyResult<BTreeMap<TaskId, f64>> {
@@ -258,6 +274,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(openloop_tasks, m)?)?;
     m.add_function(wrap_pyfunction!(openloop_task_from_stem, m)?)?;
     m.add_function(wrap_pyfunction!(openloop_task_from_record, m)?)?;
+    m.add_function(wrap_pyfunction!(openloop_task_from_original_file, m)?)?;
     m.add_function(wrap_pyfunction!(openloop_score_answer, m)?)?;
     m.add_function(wrap_pyfunction!(openloop_score_task, m)?)?;
     m.add_function(wrap_pyfunction!(openloop_score_file, m)?)?;

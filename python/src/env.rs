@@ -4,7 +4,7 @@
 use crate::errors::to_pyerr;
 use crate::json::to_py;
 use dh_agents::expert::{Expert, ExpertParams};
-use dh_env::drive::{ActuationBridge, Control, Decision};
+use dh_env::drive::{ActuationBridge, Control, Decision, DecisionFailure};
 use dh_env::render::{BevConfig, CameraConfig, GifWriter, Image};
 use dh_env::scenario::{LoadOptions, MapCache};
 use dh_env::sim::{Action, ActionMode, Observation, Sim, SimConfig, StepInfo};
@@ -75,6 +75,32 @@ impl PySim {
         }
         self.expert_bridge.reset();
         Ok((obs_to_py(py, obs)?, info_to_py(py, &info)?))
+    }
+
+    /// A decision given as a raw VLM reply (`None`: no reply, e.g. a transport error), parsed
+    /// here by the protocol's reply parser; a failure holds the previous control.
+    #[allow(clippy::type_complexity)]
+    #[pyo3(signature = (reply))]
+    fn step_reply<'py>(
+        &mut self,
+        py: Python<'py>,
+        reply: Option<String>,
+    ) -> PyResult<(Bound<'py, PyDict>, f64, bool, bool, Bound<'py, PyAny>)> {
+        let parsed = match &reply {
+            Some(text) => dh_agents::vlm::parse_for_env(text),
+            None => Err(DecisionFailure::NoReply),
+        };
+        let action = Action::Reply { raw: reply, parsed };
+        let inner = &mut self.inner;
+        let out = py.detach(|| inner.step(action)).map_err(|e| err(py, e))?;
+        Ok((obs_to_py(py, out.observation)?, out.reward, out.terminated, false, info_to_py(py, &out.info)?))
+    }
+
+    /// Every decision of the running episode: decision, tick, raw, parsed, failure, control.
+    fn decision_log<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let log = self.inner.decision_log().map_err(|e| err(py, e))?;
+        let v = serde_json::to_value(log).map_err(|e| err(py, dh_env::Error::Simulation(e.to_string())))?;
+        to_py(py, &v)
     }
 
     /// One decision: `(observation, reward, terminated, truncated, info)`.

@@ -171,20 +171,27 @@ def test_batch_scoring_contract_and_errors(tmp_path: Path) -> None:
         _core.openloop_score_task("R1_3", ['{"task_id": "x"}'], ["[1,2,3,4]"])
     with pytest.raises(ConfigError, match="unknown open-loop task"):
         _core.openloop_score_task("R9", [], [])
-    with pytest.raises(ConfigError, match="no predictions/"):
+    with pytest.raises(ConfigError, match="not a results folder"):
         score_run(tmp_path / "nowhere")
-    # A record lacking its ground truth fails the run, naming file, line and field.
+    with pytest.raises(ConfigError, match="no prediction files"):
+        score_run(tmp_path)
+    # A record lacking its ground truth is skipped; a file with nothing else fails the run,
+    # naming file, line and field.
     _write(tmp_path, "R1_1_A", [_line("R1_1_A", "q", "yes", {"Question_id": "q"})])
-    with pytest.raises(ConfigError, match=r"R1_1_A_Existence\.jsonl:1.*`answer`"):
+    with pytest.raises(ConfigError, match=r"R1_1_A_Existence\.jsonl: nothing to score.*line 1: .*`answer`"):
         score_run(tmp_path)
 
 
-def test_unknown_files_are_listed_and_weights_overridable(tmp_path: Path) -> None:
+def test_unknown_files_fail_and_weights_overridable(tmp_path: Path) -> None:
     rec = {"Question_id": "R1_1_A_0", "answer": "Yes", "image_path": "x"}
     _write(tmp_path, "R1_1_A", [_line("R1_1_A", "R1_1_A_0", "yes", rec)])
-    (tmp_path / "predictions" / "notes.jsonl").write_text("{}\n", encoding="utf-8")
+    notes = tmp_path / "predictions" / "notes.jsonl"
+    notes.write_text("{}\n", encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"notes\.jsonl: unknown task file"):
+        score_run(tmp_path)
+    notes.unlink()
     res = score_run(tmp_path, weights={"R1_1_A": 1.0})
-    assert res["skipped_files"][0] == {"source_file": "notes.jsonl", "reason": "unknown_task_type"}
+    assert res["skipped_files"] == []
     assert res["weights"] == {"R1_1_A": 1.0}
     assert res["S_open"] == 100.0
     assert res["config"]["l1_4"]["skip_reason"] == "l1_4_result_file_missing"

@@ -9,6 +9,7 @@ from typing import Any
 
 import pytest
 
+from drivehierarchy import ConfigError
 from drivehierarchy.benchmark.openloop import judge as judge_mod
 from drivehierarchy.benchmark.openloop.judge import JudgeResult, JudgeSkipped, judge_input, run_judge
 from drivehierarchy.benchmark.openloop.scoring import score_run
@@ -135,6 +136,18 @@ def test_real_tiny_bert_judge_scores_run(tmp_path: Path) -> None:
     assert out["config"]["l1_4"]["enabled"] is True
     assert out["tasks"]["R1_4"]["mean"] == pytest.approx(res.scores[0], abs=1e-6)
     assert out["per_file"][0]["pass_rate"] in (0.0, 1.0)
+    # The original runner's line for the same record: the judge reads question, ground_truth
+    # and model_prediction from it, with the same score; --skip-l1-4 leaves nothing to score.
+    orig = tmp_path / "original"
+    orig.mkdir()
+    line = {"Question_id": "R1_4_0", "question": items[0][0], "ground_truth": items[0][1]}
+    line["model_prediction"] = "stopped"
+    (orig / "R1_4_Situation_Description_pred.jsonl").write_text(json.dumps(line) + "\n", encoding="utf-8")
+    res_orig = score_run(orig, judge_model=model_dir, judge_device=-1)
+    assert res_orig["layout"] == "original"
+    assert res_orig["tasks"]["R1_4"]["mean"] == out["tasks"]["R1_4"]["mean"]
+    with pytest.raises(ConfigError, match="skip_l1_4_flag"):
+        score_run(orig, judge_model=model_dir, skip_l1_4=True)
 
 
 def test_judge_module_imports_without_transformers() -> None:

@@ -73,7 +73,11 @@ def test_observation_contents_follow_the_protocol() -> None:
     state = dict(zip(STATE_FIELDS, obs["state"].tolist(), strict=True))
     assert state["route_length_m"] == pytest.approx(info["route_length_m"], rel=1e-6)
     assert state["route_p1_forward_m"] == pytest.approx(5.0, abs=0.3)
-    assert info["tick"] == 0 and info["termination_reason"] is None
+    # The original's warm-up: zero control on ticks 1–4; the first decision sees tick 4.
+    assert info["tick"] == 4 and info["decision"] == 0 and info["termination_reason"] is None
+    assert info["reply"] is None
+    _, early = make(warmup_ticks=0, **NO_IMAGES).reset(seed=3)
+    assert early["tick"] == 0
 
 
 @pytest.mark.parametrize("path", builtin_scenarios(), ids=scenario_id)
@@ -94,7 +98,7 @@ def test_zero_speed_policy_ends_with_blocked_timeout_and_the_protocol_score() ->
     assert s["termination_reason"] == "blocked_timeout"
     # Speed < 1 km/h for more than 100 consecutive ticks, counted from t = 0: ends at tick 101.
     assert s["ticks"] == 101
-    assert s["meta"]["sim_duration"] == pytest.approx(101 * 0.05)
+    assert s["meta"]["duration_game"] == 5.05
     # Hand-computed: no progress → S_route 0; safety = 0.7 (blocked) × (1 − 0 off-road);
     # no travel → distance efficiency 1; 1.5·T_ref ≥ 5.05 s → time efficiency 1.
     assert s["score_route"] == 0.0
@@ -103,10 +107,11 @@ def test_zero_speed_policy_ends_with_blocked_timeout_and_the_protocol_score() ->
     assert s["score_composed"] == 0.0
     assert [e["type"] for e in s["events"]] == ["blocked_timeout"]
     assert s["events"][0]["penalty_multiplier"] == 0.7
+    assert s["events"][0]["blocked_steps"] == 101
     assert s["status"] == "Failed"
 
 
-def test_steering_off_the_road_ends_with_offroad_timeout_1_5_s_after_leaving() -> None:
+def test_steering_off_the_road_ends_on_the_31st_off_road_tick() -> None:
     env = make(**NO_IMAGES)
     env.reset(seed=0)
     actions = [[0.12, 8.0]] + [[0.24, 8.0]] * 4 + [[0.0, 8.0]] * 400
@@ -119,11 +124,43 @@ def test_steering_off_the_road_ends_with_offroad_timeout_1_5_s_after_leaving() -
     ticks = ticks_of(env)
     first_off = next(i for i, t in enumerate(ticks) if not t["on_road"])
     assert all(not t["on_road"] for t in ticks[first_off:])
-    last_on_time = ticks[first_off - 1]["time_s"]
-    assert ticks[-1]["time_s"] - last_on_time == pytest.approx(1.5, abs=1e-9)
-    assert len(ticks) - first_off == 30
+    # The original measures 1.5 s from the first off-road sample: the 31st off-road tick ends it.
+    assert ticks[-1]["time_s"] - ticks[first_off]["time_s"] == pytest.approx(1.5, abs=1e-9)
+    assert len(ticks) - first_off == 31
     s = env.score()
     assert s["score_safety"] == 0.0 and s["score_composed"] == 0.0
+    assert [e["type"] for e in s["events"]] == ["route_deviation"]
+    assert s["events"][0]["offroad_duration"] == 1.5
+    assert s["termination_reason"] == "offroad_timeout"
+
+
+def test_raw_replies_are_parsed_in_rust_and_a_failure_holds_the_control() -> None:
+    env = make("07_sudden_brake/town01_lead_brakes", **NO_IMAGES)
+    env.reset(seed=0)
+    _, _, _, _, first = env.step("steer: 0.3\ntarget_speed_mps: 6.0")
+    held = first["control"]
+    assert held["steer"] == pytest.approx(0.12)  # rate-limited from 0
+    assert first["reply"]["parsed"] == {"steer": 0.3, "target_speed_mps": 6.0}
+    before = len(ticks_of(env))
+    _, _, _, _, info = env.step("I would keep going carefully.")
+    assert info["control"] == held
+    assert info["parse_failures"] == 1
+    assert info["reply"]["failure"] == "missing_both"
+    assert info["reply"]["raw"] == "I would keep going carefully."
+    assert info["reply"]["parsed"] is None
+    # The control was unchanged for the 5 ticks of that decision.
+    assert len(ticks_of(env)) - before == 5
+    # `None` is "no reply" (a transport error): held and counted too.
+    _, _, _, _, info = env.unwrapped.step_reply(None)
+    assert info["control"] == held and info["reply"]["failure"] == "no_reply"
+    log = env.unwrapped.decision_log()
+    assert [d["tick"] for d in log] == [4, 9, 14]
+    assert [d["failure"] for d in log] == [None, "missing_both", "no_reply"]
+    assert env.score()["parse_failures"] == 2
+    raw = make(action_mode="raw", **NO_IMAGES)
+    raw.reset(seed=0)
+    with pytest.raises(ConfigError, match="action_mode"):
+        raw.step("steer: 0.1\ntarget_speed_mps: 3")
 
 
 def run_fixed(seed: int, images: bool) -> tuple[str, list[bytes], list[float]]:

@@ -82,7 +82,7 @@ def test_frame_shapes_and_dtypes_follow_the_config() -> None:
     obs, *_ = env.step(np.array([0.0, 5.0], np.float32))
     assert obs["front"].shape == (180, 320, 3) and obs["bev"].shape == (128, 128, 3)
     # The BEV's centre is the yellow ego disc at any size.
-    assert tuple(obs["bev"][64, 64]) == (255, 215, 0)
+    assert tuple(obs["bev"][64, 64]) == (255, 230, 80)  # the ego disc
 
     sim = env.unwrapped.sim
     for w, h in ((400, 225), (64, 48), (801, 451)):

@@ -33,6 +33,17 @@ pub struct Decision {
     pub target_speed_mps: f64,
 }
 
+/// Why a decision step carried no usable decision. The first three are the reply parser's
+/// (`dh_agents::vlm::ParseFailure`); `no_reply` is a transport error or timeout.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DecisionFailure {
+    MissingSteer,
+    MissingTargetSpeed,
+    MissingBoth,
+    NoReply,
+}
+
 /// The command applied to the ego until the next decision. Pedals in [0, 1], steer in [−1, 1].
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct Control {

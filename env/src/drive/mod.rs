@@ -7,7 +7,7 @@ pub mod command;
 pub mod prompt;
 pub mod route;
 
-pub use bridge::{ActuationBridge, Control, Decision};
+pub use bridge::{ActuationBridge, Control, Decision, DecisionFailure};
 pub use command::{navigation_command, Command};
 pub use prompt::{condition_prefix, decision_prompt, format_1f, ACTION_QUESTION};
 pub use route::{RouteTracker, RouteView, LOOKAHEAD_M, SAMPLE_DISTANCES_M};

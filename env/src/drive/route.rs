@@ -61,6 +61,19 @@ impl RouteTracker {
             .collect();
         RouteView { progress_m: progress, distance_to_go_m: Some((len - progress).max(0.0)), points }
     }
+
+    /// The local route slice [progress, min(L, progress + 60 m)] that the BEV overlay draws
+    /// (its vertices, not the 8 samples); empty when the route or the pose is unusable.
+    pub fn local_slice(&self, ego: &Pose) -> Polyline {
+        let len = self.route.length();
+        if self.route.len() < 2 || !len.is_finite() || len <= 0.0 || !ego.pos.is_finite() {
+            return Polyline::default();
+        }
+        match self.route.project(ego.pos) {
+            Some(proj) => self.route.slice(proj.s, len.min(proj.s + LOOKAHEAD_M)),
+            None => Polyline::default(),
+        }
+    }
 }
 
 #[cfg(test)]

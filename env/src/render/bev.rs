@@ -1,6 +1,11 @@
 //! Bird's-eye view (PROTOCOL §2.1): top-down, ego at the centre, ego forward = up, with the
-//! local route drawn as a red polyline, white dots with a red outline on its last points, and
-//! a yellow ego disc. Same precomputed geometry as the cameras, drawn as 2-D shapes through a
+//! local route overlay drawn exactly as the original draws it (pixel sizes and colours): a
+//! (255, 90, 90) 3 px polyline from the ego centre through every vertex of the local route
+//! slice, a white dot with a 2 px (255, 90, 90) outline on every visible vertex (radius 4 px,
+//! the last 5 px), and the ego as a (255, 230, 80) disc of radius 6 px with a 2 px
+//! (20, 20, 20) outline. The scale stays 8 px/m: the original derived its overlay scale from
+//! the BEV camera's world height and so drew the route at about 6.3 px/m on tongji, a bug we
+//! do not copy. Same precomputed geometry as the cameras, drawn as 2-D shapes through a
 //! [`RasterBackend`] (by default the scanline rasterizer: no anti-aliasing, deterministic and
 //! fast).
 
@@ -20,20 +25,18 @@ pub struct BevConfig {
     pub size_px: u32,
     /// Scale, pixels per metre (protocol: 50 m up, FOV 90°, 800 px → 8 px/m).
     pub px_per_m: f64,
-    /// How many of the last route points get a white dot with a red outline.
-    pub route_dots_last: u32,
 }
 
 impl Default for BevConfig {
     fn default() -> Self {
-        BevConfig { size_px: 800, px_per_m: 8.0, route_dots_last: 3 }
+        BevConfig { size_px: 800, px_per_m: 8.0 }
     }
 }
 
 impl BevConfig {
     /// Small view for RL: 128×128 px at 2 px/m (64 m across).
     pub fn rl() -> Self {
-        BevConfig { size_px: 128, px_per_m: 2.0, route_dots_last: 3 }
+        BevConfig { size_px: 128, px_per_m: 2.0 }
     }
 
     pub fn validate(&self) -> Result<()> {
@@ -48,11 +51,15 @@ impl BevConfig {
 }
 
 const BACKGROUND: [u8; 3] = [46, 54, 44];
-pub(crate) const ROUTE_RED: [u8; 3] = [230, 20, 20];
-pub(crate) const EGO_YELLOW: [u8; 3] = [255, 215, 0];
-const ROUTE_LINE_M: f32 = 0.6;
-const ROUTE_DOT_M: f32 = 0.8;
-const EGO_DISC_M: f32 = 1.3;
+/// The original's overlay, in pixels.
+pub(crate) const ROUTE_RED: [u8; 3] = [255, 90, 90];
+pub(crate) const ROUTE_LINE_PX: f32 = 3.0;
+pub(crate) const ROUTE_DOT_PX: f32 = 4.0;
+pub(crate) const ROUTE_LAST_DOT_PX: f32 = 5.0;
+pub(crate) const DOT_OUTLINE_PX: f32 = 2.0;
+pub(crate) const EGO_YELLOW: [u8; 3] = [255, 230, 80];
+pub(crate) const EGO_OUTLINE: [u8; 3] = [20, 20, 20];
+pub(crate) const EGO_DISC_PX: f32 = 6.0;
 
 fn mat_colors() -> [[u8; 3]; N_MATS] {
     let mut c = [[0u8; 3]; N_MATS];
@@ -227,20 +234,30 @@ impl Renderer {
                 );
             }
         }
-        // Route: red polyline through the points, dots on the last ones, then the ego disc.
+        // Route overlay: polyline from the ego centre through the slice vertices, a dot on every
+        // visible vertex (outline colour first, white inside), then the ego disc.
         let mut pts = std::mem::take(&mut self.pts);
         pts.clear();
+        let centre = v.px(v.ego);
+        pts.push(centre);
         pts.extend(frame.route_points.iter().map(|q| {
             let r = *q - map.origin;
             v.px([r.x as f32, r.y as f32])
         }));
-        b.stroke_polyline(&pts, (ROUTE_LINE_M * v.s * 0.5).max(0.6), ROUTE_RED);
-        let dot_r = (ROUTE_DOT_M * v.s).max(1.5);
-        for p in pts.iter().skip(pts.len().saturating_sub(cfg.route_dots_last as usize)) {
-            b.fill_disc(*p, dot_r, ROUTE_RED);
-            b.fill_disc(*p, (dot_r * 0.62).max(dot_r - 2.5), [255, 255, 255]);
+        if pts.len() > 1 {
+            b.stroke_polyline(&pts, ROUTE_LINE_PX * 0.5, ROUTE_RED);
         }
-        b.fill_disc(v.px(v.ego), (EGO_DISC_M * v.s).max(2.0), EGO_YELLOW);
+        let last = pts.len().saturating_sub(1);
+        for (i, p) in pts.iter().enumerate().skip(1) {
+            if p.x < 0.0 || p.y < 0.0 || p.x >= nf || p.y >= nf {
+                continue;
+            }
+            let r = if i == last { ROUTE_LAST_DOT_PX } else { ROUTE_DOT_PX };
+            b.fill_disc(*p, r, ROUTE_RED);
+            b.fill_disc(*p, r - DOT_OUTLINE_PX, [255, 255, 255]);
+        }
+        b.fill_disc(centre, EGO_DISC_PX, EGO_OUTLINE);
+        b.fill_disc(centre, EGO_DISC_PX - DOT_OUTLINE_PX, EGO_YELLOW);
         self.pts = pts;
     }
 }

@@ -2,7 +2,7 @@
 //! check what the views draw (kinds, colours, places, order) without looking at pixels, which
 //! also proves the views reach the rasterizer only through the trait.
 
-use super::bev::{EGO_YELLOW, ROUTE_RED};
+use super::bev::{EGO_OUTLINE, EGO_YELLOW, ROUTE_RED};
 use super::camera::Cam;
 use super::raster::{RasterBackend, SV};
 use super::{BevConfig, CameraConfig, FrameInput, RenderMap, Renderer};
@@ -138,7 +138,7 @@ fn bev_issues_route_polyline_dots_and_ego_disc_in_protocol_colours() {
     let dists = [5.0, 10.0, 20.0, 40.0];
     let route: Vec<Vec2> = dists.iter().map(|d| ep.local_to_world(*d, 0.0)).collect();
     let frame = FrameInput { ego: &ego, actors: &actors, lights: &lights, signs: &[], route_points: &route };
-    let cfg = BevConfig::default(); // 800 px, 8 px/m, 3 dots
+    let cfg = BevConfig::default(); // 800 px, 8 px/m
     let mut rec = Recorder { height: 800, prims: Vec::new() };
     Renderer::new().draw_bev(&map, &frame, &cfg, &mut rec);
     let p = &rec.prims;
@@ -147,35 +147,46 @@ fn bev_issues_route_polyline_dots_and_ego_disc_in_protocol_colours() {
     assert!(matches!(&p[0], Prim::Rows(rows) if rows.len() == 800 && rows.iter().all(|c| *c == rows[0])));
     assert!(p.iter().filter(|q| matches!(q, Prim::Convex { n: 3, .. })).count() > 10, "no road drawn");
 
-    // One red route polyline through the points, straight up from the ego at the centre.
+    // One route polyline (255, 90, 90), 3 px, from the ego centre through every slice vertex.
     let lines: Vec<_> = p.iter().filter(|q| matches!(q, Prim::Polyline { .. })).collect();
     assert_eq!(lines.len(), 1, "{lines:?}");
     let Prim::Polyline { pts, hw, col } = lines[0] else { unreachable!() };
-    assert_eq!(*col, ROUTE_RED);
-    assert!(close(*hw, 0.6 * 8.0 * 0.5), "half width {hw}");
-    assert_eq!(pts.len(), dists.len());
-    for (q, d) in pts.iter().zip(dists) {
+    assert_eq!(*col, [255, 90, 90]);
+    assert!(close(*hw, 1.5), "half width {hw}");
+    assert_eq!(pts.len(), dists.len() + 1);
+    assert!(close(pts[0][0], 400.0) && close(pts[0][1], 400.0), "starts at the ego centre: {:?}", pts[0]);
+    for (q, d) in pts[1..].iter().zip(dists) {
         assert!(close(q[0], 400.0) && close(q[1], 400.0 - 8.0 * d as f32), "{q:?} for {d} m");
     }
 
-    // After it: a red dot with a white centre on each of the last three points, then the ego.
+    // After it: on every vertex a (255, 90, 90) disc with a white disc 2 px smaller inside,
+    // radius 4 (the last 5); then the ego: a dark disc of radius 6 with a yellow one of 4.
     let at = p.iter().position(|q| matches!(q, Prim::Polyline { .. })).unwrap();
     let tail = &p[at + 1..];
-    assert_eq!(tail.len(), 3 * 2 + 1, "{tail:?}");
-    for (k, d) in dists[1..].iter().enumerate() {
+    assert_eq!(tail.len(), dists.len() * 2 + 2, "{tail:?}");
+    for (k, d) in dists.iter().enumerate() {
         let y = 400.0 - 8.0 * *d as f32;
-        let (red, white) = (&tail[2 * k], &tail[2 * k + 1]);
+        let r = if k + 1 == dists.len() { 5.0 } else { 4.0 };
+        let (outline, white) = (&tail[2 * k], &tail[2 * k + 1]);
         assert!(
-            matches!(red, Prim::Disc { c, r, col } if close(c[1], y) && close(*r, 6.4) && *col == ROUTE_RED)
+            matches!(outline, Prim::Disc { c, r: rr, col } if close(c[1], y) && close(*rr, r) && *col == ROUTE_RED),
+            "{outline:?}"
         );
         assert!(
-            matches!(white, Prim::Disc { c, r, col } if close(c[1], y) && *r < 6.4 && *col == [255, 255, 255])
+            matches!(white, Prim::Disc { c, r: rr, col } if close(c[1], y) && close(*rr, r - 2.0) && *col == [255, 255, 255]),
+            "{white:?}"
         );
     }
+    let n = tail.len();
     assert!(
-        matches!(tail[6], Prim::Disc { c, r, col } if c == [400.0, 400.0] && close(r, 10.4) && col == EGO_YELLOW),
+        matches!(tail[n - 2], Prim::Disc { c, r, col } if c == [400.0, 400.0] && close(r, 6.0) && col == EGO_OUTLINE),
         "{:?}",
-        tail[6]
+        tail[n - 2]
+    );
+    assert!(
+        matches!(tail[n - 1], Prim::Disc { c, r, col } if c == [400.0, 400.0] && close(r, 4.0) && col == EGO_YELLOW && col == [255, 230, 80]),
+        "{:?}",
+        tail[n - 1]
     );
 
     // The actor 10 m ahead: its body quad centred 80 px above the ego, under the route.

@@ -186,6 +186,8 @@ pub struct ResolvedScenario {
     pub seed: u64,
     /// As written; see [`ResolvedScenario::reference_duration_s`] for the effective value.
     pub reference_duration_given_s: Option<f64>,
+    /// As written; see [`ResolvedScenario::scenario_duration_s`] for the effective value.
+    pub duration_given_s: Option<f64>,
     pub ego: ResolvedEgo,
     /// Scripted/external actors in file order, then obstacles in file order.
     pub actors: Vec<ResolvedActor>,
@@ -201,6 +203,48 @@ impl ResolvedScenario {
     pub fn reference_duration_s(&self) -> f64 {
         self.reference_duration_given_s.unwrap_or(self.route_length_m() / DEFAULT_REFERENCE_SPEED_MPS)
     }
+
+    /// The scenario duration of §2.4 (the scenario timeout is 2 × it): the file's `duration_s`,
+    /// else — like the original's "longest estimated duration over all actors, ego included" —
+    /// the largest of T_ref and every scripted actor's estimated finish time (start trigger +
+    /// travel time of its legs + any brake hold). An ego-distance trigger is estimated to fire
+    /// when the ego, progressing at L / T_ref, comes within the trigger radius of its point.
+    pub fn scenario_duration_s(&self) -> f64 {
+        if let Some(d) = self.duration_given_s {
+            return d;
+        }
+        let t_ref = self.reference_duration_s();
+        let ego_speed = self.route_length_m() / t_ref;
+        self.actors
+            .iter()
+            .filter_map(|a| match &a.motion {
+                ActorMotion::Scripted(p) => Some(scripted_finish_s(p, &self.ego.route, ego_speed)),
+                _ => None,
+            })
+            .filter(|d| d.is_finite())
+            .fold(t_ref, f64::max)
+    }
+}
+
+/// Estimated time at which a scripted actor finishes its path.
+fn scripted_finish_s(p: &ScriptedPath, ego_route: &Polyline, ego_speed_mps: f64) -> f64 {
+    let start = match p.trigger {
+        Trigger::Time(t) => t,
+        Trigger::EgoWithin { radius_m, point } => match ego_route.project(point) {
+            Some(proj) if ego_speed_mps > 0.0 => (proj.s - radius_m).max(0.0) / ego_speed_mps,
+            _ => 0.0,
+        },
+    };
+    let mut travel = 0.0;
+    let mut from = 0.0;
+    for &(end, speed) in &p.legs {
+        if speed > 0.0 {
+            travel += (end - from).max(0.0) / speed;
+        }
+        from = end;
+    }
+    let hold = p.brake.and_then(|b| b.hold_s).unwrap_or(0.0);
+    start + travel + hold
 }
 
 /// Where `sumo:` maps live and an optional cache of loaded networks.
@@ -924,9 +968,13 @@ pub fn resolve(file: &Path, spec: &ScenarioFile, opts: &LoadOptions) -> Result<R
             format!("must be one of {}", CATEGORIES.join(", ")),
         ));
     }
-    if let Some(r) = spec.reference_duration_s {
-        if !(r.is_finite() && r > 0.0) {
-            return Err(Error::scenario(file, "reference_duration_s", r, "must be a finite number > 0"));
+    for (field, value) in
+        [("reference_duration_s", spec.reference_duration_s), ("duration_s", spec.duration_s)]
+    {
+        if let Some(r) = value {
+            if !(r.is_finite() && r > 0.0) {
+                return Err(Error::scenario(file, field, r, "must be a finite number > 0"));
+            }
         }
     }
     let map_path = resolve_map_path(file, &spec.map, opts.sumo_home.as_deref())?;
@@ -957,6 +1005,7 @@ pub fn resolve(file: &Path, spec: &ScenarioFile, opts: &LoadOptions) -> Result<R
         map: map.clone(),
         seed: spec.seed,
         reference_duration_given_s: spec.reference_duration_s,
+        duration_given_s: spec.duration_s,
         ego,
         actors,
         signs,

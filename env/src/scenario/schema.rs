@@ -37,8 +37,13 @@ pub struct ScenarioFile {
     pub description: String,
     /// Path relative to the scenario file, or `sumo:<path under SUMO_HOME>`.
     pub map: String,
+    /// T_ref: the ego's reference duration (efficiency term only).
     #[serde(default)]
     pub reference_duration_s: Option<f64>,
+    /// The scenario duration: the longest estimated duration over all actors, ego included.
+    /// The scenario timeout is 2 × it. Default: see `ResolvedScenario::scenario_duration_s`.
+    #[serde(default)]
+    pub duration_s: Option<f64>,
     #[serde(default)]
     pub seed: u64,
     pub ego: EgoSpec,

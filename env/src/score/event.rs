@@ -47,7 +47,8 @@ impl TerminationReason {
     }
 }
 
-/// Kinds of recorded events. The terminating ones carry the protocol penalty; the two
+/// Kinds of recorded events, named as the original's `scene_score.json` names them. The
+/// terminating ones carry the protocol penalty (`destination_reached` carries none); the two
 /// traffic-rule infractions are ours (multiplier 1 in the protocol score, used by the CARLA
 /// dialect only).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -56,7 +57,9 @@ pub enum EventKind {
     CollisionPedestrian,
     CollisionVehicle,
     CollisionStatic,
-    OffroadTimeout,
+    /// The off-road timeout (the termination reason stays `offroad_timeout`).
+    RouteDeviation,
+    DestinationReached,
     BlockedTimeout,
     ScenarioTimeout,
     ManualInterrupt,
@@ -66,48 +69,53 @@ pub enum EventKind {
 }
 
 impl EventKind {
-    /// Event recorded when a run terminates for `reason` (none for reaching the destination).
+    /// Event recorded when a run terminates for `reason` (none for an unfinished run).
     pub fn for_termination(reason: TerminationReason) -> Option<EventKind> {
         Some(match reason {
             TerminationReason::CollisionPedestrian => Self::CollisionPedestrian,
             TerminationReason::CollisionVehicle => Self::CollisionVehicle,
             TerminationReason::CollisionStatic => Self::CollisionStatic,
-            TerminationReason::OffroadTimeout => Self::OffroadTimeout,
+            TerminationReason::OffroadTimeout => Self::RouteDeviation,
+            TerminationReason::DestinationReached => Self::DestinationReached,
             TerminationReason::BlockedTimeout => Self::BlockedTimeout,
             TerminationReason::ScenarioTimeout => Self::ScenarioTimeout,
             TerminationReason::ManualInterrupt => Self::ManualInterrupt,
             TerminationReason::SystemError => Self::SystemError,
-            TerminationReason::DestinationReached | TerminationReason::Incomplete => return None,
+            TerminationReason::Incomplete => return None,
         })
     }
 
-    /// Protocol safety multiplier of this event.
-    pub fn penalty(self, p: &super::params::Penalties) -> f64 {
-        match self {
+    /// Protocol safety multiplier of this event; `None` for `destination_reached`, which the
+    /// original records without one.
+    pub fn penalty(self, p: &super::params::Penalties) -> Option<f64> {
+        Some(match self {
             Self::CollisionPedestrian => p.collision_pedestrian,
             Self::CollisionVehicle => p.collision_vehicle,
             Self::CollisionStatic => p.collision_static,
-            Self::OffroadTimeout => p.offroad_timeout,
+            Self::RouteDeviation => p.offroad_timeout,
             Self::BlockedTimeout => p.blocked_timeout,
             Self::ScenarioTimeout => p.scenario_timeout,
             Self::ManualInterrupt => p.manual_interrupt,
             Self::SystemError => p.system_error,
             Self::RedLightViolation | Self::StopSignViolation => 1.0,
-        }
+            Self::DestinationReached => return None,
+        })
     }
 }
 
-/// One entry of `events[]`: `{"type", "time", <details…>, "penalty_multiplier"}`.
+/// One entry of `events[]`: `{"type", "time", <details…>, "penalty_multiplier"?}`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Event {
     #[serde(rename = "type")]
     pub kind: EventKind,
-    /// Sim time of the tick the event happened in, seconds.
+    /// Sim time of the tick the event happened in, seconds (rounded to 3 decimals in records,
+    /// as the original writes it).
     #[serde(rename = "time")]
     pub time_s: f64,
     #[serde(flatten)]
     pub details: Map<String, Value>,
-    pub penalty_multiplier: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub penalty_multiplier: Option<f64>,
 }
 
 /// A contact of the ego during one tick.
@@ -167,7 +175,8 @@ mod tests {
     fn event_serialises_like_the_original() {
         let mut details = Map::new();
         details.insert("other_actor_id".into(), Value::from(7));
-        let e = Event { kind: EventKind::CollisionVehicle, time_s: 3.5, details, penalty_multiplier: 0.2 };
+        let e =
+            Event { kind: EventKind::CollisionVehicle, time_s: 3.5, details, penalty_multiplier: Some(0.2) };
         let s = serde_json::to_string(&e).unwrap();
         assert_eq!(
             s,
@@ -180,26 +189,32 @@ mod tests {
     #[test]
     fn names_and_penalties() {
         let p = super::super::params::Penalties::default();
+        // (reason, event type of the original, its multiplier)
         let all = [
-            (TerminationReason::CollisionPedestrian, Some(0.0)),
-            (TerminationReason::CollisionVehicle, Some(0.2)),
-            (TerminationReason::CollisionStatic, Some(0.3)),
-            (TerminationReason::OffroadTimeout, Some(0.0)),
-            (TerminationReason::DestinationReached, None),
-            (TerminationReason::BlockedTimeout, Some(0.7)),
-            (TerminationReason::ScenarioTimeout, Some(0.7)),
-            (TerminationReason::ManualInterrupt, Some(0.0)),
-            (TerminationReason::SystemError, Some(0.0)),
-            (TerminationReason::Incomplete, None),
+            (TerminationReason::CollisionPedestrian, Some("collision_pedestrian"), Some(0.0)),
+            (TerminationReason::CollisionVehicle, Some("collision_vehicle"), Some(0.2)),
+            (TerminationReason::CollisionStatic, Some("collision_static"), Some(0.3)),
+            (TerminationReason::OffroadTimeout, Some("route_deviation"), Some(0.0)),
+            (TerminationReason::DestinationReached, Some("destination_reached"), None),
+            (TerminationReason::BlockedTimeout, Some("blocked_timeout"), Some(0.7)),
+            (TerminationReason::ScenarioTimeout, Some("scenario_timeout"), Some(0.7)),
+            (TerminationReason::ManualInterrupt, Some("manual_interrupt"), Some(0.0)),
+            (TerminationReason::SystemError, Some("system_error"), Some(0.0)),
+            (TerminationReason::Incomplete, None, None),
         ];
-        for (r, pen) in all {
+        for (r, name, pen) in all {
             assert_eq!(serde_json::to_value(r).unwrap(), Value::from(r.as_str()));
             let kind = EventKind::for_termination(r);
-            assert_eq!(kind.map(|k| k.penalty(&p)), pen);
-            if let Some(k) = kind {
-                assert_eq!(serde_json::to_value(k).unwrap(), Value::from(r.as_str()));
-            }
+            assert_eq!(kind.and_then(|k| k.penalty(&p)), pen);
+            assert_eq!(kind.map(|k| serde_json::to_value(k).unwrap()), name.map(Value::from));
         }
-        assert_eq!(EventKind::RedLightViolation.penalty(&p), 1.0);
+        assert_eq!(EventKind::RedLightViolation.penalty(&p), Some(1.0));
+        let d = Event {
+            kind: EventKind::DestinationReached,
+            time_s: 9.2,
+            details: Map::new(),
+            penalty_multiplier: None,
+        };
+        assert_eq!(serde_json::to_string(&d).unwrap(), r#"{"type":"destination_reached","time":9.2}"#);
     }
 }

@@ -61,7 +61,7 @@ impl Default for CarlaPenalties {
 pub struct ScoreParams {
     /// Simulation step; time is `ticks × dt_s` (ticks are counted, never summed as floats).
     pub dt_s: f64,
-    /// Continuous off-road time that ends the run.
+    /// Continuous off-road time that ends the run, measured from the first off-road sample.
     pub offroad_timeout_s: f64,
     /// 2-D distance to the destination at which it counts as reached (≤).
     pub destination_radius_m: f64,
@@ -69,7 +69,7 @@ pub struct ScoreParams {
     pub blocked_speed_kmh: f64,
     /// The run is blocked when slow for more than this many consecutive ticks.
     pub blocked_ticks: u64,
-    /// Scenario timeout at sim time ≥ factor × reference duration.
+    /// Scenario timeout at sim time ≥ factor × the scenario duration.
     pub scenario_timeout_factor: f64,
     /// Progress counts only while |lateral offset| from the route ≤ this.
     pub progress_lateral_m: f64,
@@ -110,12 +110,14 @@ impl Default for ScoreParams {
 }
 
 impl ScoreParams {
-    /// Consecutive off-road ticks that make the timeout: the smallest n with n·dt ≥ timeout
-    /// (30 at the protocol values). A tiny tolerance absorbs 1.5/0.05 = 29.999…
+    /// Consecutive off-road ticks that make the timeout. The original measures the time from
+    /// the first off-road sample (`t − t_first ≥ 1.5 s`), so it ends on the sample n + 1 where n
+    /// is the smallest count with n·dt ≥ timeout: the 31st off-road tick at the protocol values.
+    /// A tiny tolerance absorbs 1.5/0.05 = 29.999…
     pub fn offroad_timeout_ticks(&self) -> u64 {
         let n = (self.offroad_timeout_s / self.dt_s - 1e-9).ceil();
-        if n.is_finite() && n >= 1.0 {
-            n as u64
+        if n.is_finite() && n >= 0.0 {
+            n as u64 + 1
         } else {
             1
         }
@@ -186,7 +188,7 @@ mod tests {
         let p = ScoreParams::default();
         assert_eq!(p.dt_s, 0.05);
         assert_eq!(p.offroad_timeout_s, 1.5);
-        assert_eq!(p.offroad_timeout_ticks(), 30);
+        assert_eq!(p.offroad_timeout_ticks(), 31);
         assert_eq!(p.destination_radius_m, 8.0);
         assert_eq!(p.blocked_speed_kmh, 1.0);
         assert_eq!(p.blocked_ticks, 100);
@@ -233,7 +235,7 @@ mod tests {
         let p: Result<ScoreParams, _> = serde_json::from_str(r#"{"dt":0.1}"#);
         assert!(p.is_err(), "unknown keys are rejected");
         let p: ScoreParams = serde_json::from_str(r#"{"offroad_timeout_s":1.0}"#).unwrap();
-        assert_eq!(p.offroad_timeout_ticks(), 20);
+        assert_eq!(p.offroad_timeout_ticks(), 21);
         assert_eq!(p.blocked_ticks, 100);
     }
 }

@@ -3,14 +3,14 @@
 use super::event::{Event, TerminationReason};
 use serde::{Deserialize, Serialize};
 
-/// Version of the scoring protocol implemented here; written into every record.
-pub const PROTOCOL_VERSION: &str = "drivehierarchy-r4/1";
+/// Version of the scoring protocol implemented here; written into every record and run log.
+/// 2: the original's record keys and rounding, the off-road timeout on the 31st tick, the
+/// scenario timeout from the scenario duration.
+pub const PROTOCOL_VERSION: &str = "drivehierarchy-r4/2";
 
-/// Outcome class of a run.
-///
-/// The paper names the three statuses without defining them; our reading: `Completed` = the
-/// run ended with `destination_reached`; `Perfect` = completed with a composed score of 100
-/// (no penalty event, no off-road time, both efficiencies 1); `Failed` = any other end.
+/// Outcome class of a run, decided as the original's scorer decides it: `Perfect` when the
+/// (rounded) route score is 100, the run did not end in a failure and the rounded safety and
+/// efficiency terms are ≥ 0.999999; `Completed` when only the first two hold; else `Failed`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum Status {
     Perfect,
@@ -18,34 +18,52 @@ pub enum Status {
     Failed,
 }
 
+/// `last_location` of the original: the ego centre at the last tick, metres, 3 decimals. Our
+/// world is 2-D, so `z` is 0; x/y are in the scenario's network (SUMO) frame — the original
+/// wrote CARLA's frame (x − offset, offset − y).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Location {
     pub x: f64,
     pub y: f64,
+    pub z: f64,
 }
 
-/// `meta{}` of the record. Distances in metres, times in seconds.
+/// `meta{}` of the record: the original's keys, rounded as the original rounds them (3
+/// decimals for lengths and times, 6 for ratios), then ours.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SceneMeta {
-    pub route_length: f64,
-    /// Best progress along the route (= route_length once the destination was reached).
-    pub completed_distance: f64,
-    pub travel_distance: f64,
-    pub offroad_time: f64,
-    /// offroad_time / sim_duration (0 for an empty run).
+    /// What the route polyline was built from (`route_edges`: lane shapes along the ego's
+    /// route edges, the original's first choice).
+    pub route_source: String,
+    pub route_length_m: f64,
+    /// Best progress along the route (= route length once the destination was reached).
+    pub completed_distance_m: f64,
+    pub travel_distance_m: f64,
+    pub offroad_time_s: f64,
+    /// clip(offroad_time / duration, 0, 1) (0 for an empty run).
     pub offroad_ratio: f64,
-    pub sim_duration: f64,
-    pub wall_duration: f64,
-    /// T_ref actually used (the scenario's, else route_length / 5.56).
-    pub reference_duration: f64,
-    /// Ours: "scenario" or "fallback".
-    pub reference_duration_source: String,
+    /// 1 − offroad_ratio.
+    pub lane_keep_penalty: f64,
+    /// Sim duration, seconds.
+    pub duration_game: f64,
+    /// Wall-clock duration, seconds.
+    pub duration_system: f64,
+    /// T_ref actually used (the scenario's, else route length / 5.56).
+    pub reference_duration_s: f64,
     pub distance_efficiency: f64,
     pub time_efficiency: f64,
     pub destination_radius: f64,
-    /// Ego centre at the last tick, world (SUMO network) frame.
+    /// Distance from the route at the last on-road tick (`null` if never on the road).
+    pub last_route_distance_m: Option<f64>,
     pub last_location: Location,
-    /// Ours: Π penalty multipliers of the events.
+    // Ours, unrounded.
+    /// "scenario" or "fallback" (T_ref = L / 5.56 m/s).
+    pub reference_duration_source: String,
+    /// The scenario duration (longest estimated duration over all actors).
+    pub scenario_duration_s: f64,
+    /// Scenario timeout: factor × scenario duration.
+    pub max_sim_time_s: f64,
+    /// Π penalty multipliers of the events.
     pub penalty_product: f64,
 }
 
@@ -71,7 +89,8 @@ pub struct Dialects {
     pub carla: CarlaDialect,
 }
 
-/// The scene score record (`scene_score.json`).
+/// The scene score record (`scene_score.json`): the original's keys, each `score_*` rounded to
+/// 6 decimals as the original rounds them, then ours.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SceneScore {
     pub scene_id: String,
@@ -83,9 +102,9 @@ pub struct SceneScore {
     pub score_safety: f64,
     /// 0–1.
     pub score_efficiency: f64,
-    /// score_safety × score_efficiency.
+    /// round(score_safety × score_efficiency, 6) of the rounded terms.
     pub score_penalty: f64,
-    /// S_R4 = score_route × score_safety × score_efficiency, 0–100.
+    /// S_R4 = round(score_route × score_penalty, 6) of the rounded terms, 0–100.
     pub score_composed: f64,
     pub events: Vec<Event>,
     pub meta: SceneMeta,
@@ -105,4 +124,38 @@ pub struct RunInfo {
     pub wall_duration_s: f64,
     pub decisions: u64,
     pub parse_failures: u64,
+}
+
+/// Python's `round(x, digits)`: the decimal nearest to the exact binary value, ties to even
+/// (Rust's fixed-precision formatting is exact and ties to even too), read back as f64.
+pub fn round_to(x: f64, digits: usize) -> f64 {
+    if !x.is_finite() {
+        return x;
+    }
+    let r: f64 = format!("{x:.digits$}").parse().unwrap_or(x);
+    // Python keeps the sign of zero: round(-0.0001, 3) == -0.0.
+    if r == 0.0 {
+        0.0f64.copysign(x)
+    } else {
+        r
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::round_to;
+
+    #[test]
+    fn rounding_matches_python() {
+        // Values checked against CPython's round().
+        assert_eq!(round_to(0.0078125, 6), 0.007812); // exact tie → even
+        assert_eq!(round_to(0.0234375, 6), 0.023438); // exact tie → even
+        assert_eq!(round_to(2.675, 2), 2.67); // binary value below the tie
+        assert_eq!(round_to(1.0000005, 6), 1.000001);
+        assert_eq!(round_to(0.15000000000000002, 3), 0.15);
+        assert_eq!(round_to(99.99999949999999, 6), 99.999999);
+        assert_eq!(round_to(99.9999995, 6), 100.0);
+        assert_eq!(round_to(-0.0001, 3).to_bits(), (-0.0f64).to_bits());
+        assert_eq!(round_to(123456.78949999999, 3), 123456.789);
+    }
 }

@@ -2,8 +2,9 @@
 //!
 //! A run log is one JSON object per line, tagged by `"kind"`:
 //! ```text
-//! {"kind":"header","protocol_version":"drivehierarchy-r4/1","scene_id":"…","route":[[x,y],…],
-//!  "start":[x,y],"destination":[x,y],"reference_duration_s":12.5|null,"params":{…}}
+//! {"kind":"header","protocol_version":"drivehierarchy-r4/2","scene_id":"…","route":[[x,y],…],
+//!  "start":[x,y],"start_on_road":true,"destination":[x,y],"reference_duration_s":12.5|null,
+//!  "scenario_duration_s":30.0|null,"params":{…}}
 //! {"kind":"tick","tick":1,"time_s":0.05,"x":…,"y":…,"yaw":…,"speed_mps":…,"on_road":true,
 //!  "contacts":[{"actor_id":3,"class":"vehicle"}],"red_light":false,"stop_sign":false,"stop":null}
 //! …
@@ -31,9 +32,19 @@ pub struct RunHeader {
     /// Scoring route polyline, world frame.
     pub route: Vec<[f64; 2]>,
     pub start: [f64; 2],
+    /// Whether the ego centre was on the road at t = 0 (sample 0).
+    #[serde(default = "yes")]
+    pub start_on_road: bool,
     pub destination: [f64; 2],
     pub reference_duration_s: Option<f64>,
+    /// The scenario duration (the timeout is 2 × it); `null` → the reference duration.
+    #[serde(default)]
+    pub scenario_duration_s: Option<f64>,
     pub params: ScoreParams,
+}
+
+fn yes() -> bool {
+    true
 }
 
 impl RunHeader {
@@ -51,10 +62,19 @@ impl RunHeader {
             scene_id: scene_id.into(),
             route: route.points().iter().map(|p| [p.x, p.y]).collect(),
             start: [start.x, start.y],
+            start_on_road: true,
             destination: [destination.x, destination.y],
             reference_duration_s,
+            scenario_duration_s: None,
             params,
         }
+    }
+
+    /// Sets the scenario duration and whether the start is on the road.
+    pub fn with_scenario(mut self, scenario_duration_s: Option<f64>, start_on_road: bool) -> Self {
+        self.scenario_duration_s = scenario_duration_s;
+        self.start_on_road = start_on_road;
+        self
     }
 
     /// A fresh tracker configured as the live run's was.
@@ -66,7 +86,9 @@ impl RunHeader {
             Vec2::new(self.destination[0], self.destination[1]),
             self.reference_duration_s,
             self.params.clone(),
-        )
+        )?
+        .with_scenario_duration(self.scenario_duration_s)
+        .map(|t| t.with_start_on_road(self.start_on_road))
     }
 }
 

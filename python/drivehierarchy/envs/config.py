@@ -35,7 +35,6 @@ class BevConfig:
 
     size_px: int = 800
     px_per_m: float = 8.0
-    route_dots_last: int = 3
 
 
 @dataclass(frozen=True)
@@ -50,6 +49,9 @@ class R4Config:
     scenario: str | None = None
     action_mode: ActionMode = "decision"
     decision_interval_ticks: int = 5
+    # The original applies zero control on ticks 1–4 and first asks at tick 5 with the state
+    # after tick 4: reset plays these ticks. 0 asks at t = 0.
+    warmup_ticks: int = 4
     front: CameraConfig | None = field(default_factory=CameraConfig)
     bev: BevConfig | None = field(default_factory=BevConfig)
     prompt: bool = True
@@ -62,6 +64,12 @@ class R4Config:
                 f"config `decision_interval_ticks` = {self.decision_interval_ticks!r}: "
                 "expected an integer ≥ 1"
             )
+        if (
+            not isinstance(self.warmup_ticks, int)
+            or isinstance(self.warmup_ticks, bool)
+            or self.warmup_ticks < 0
+        ):
+            raise ConfigError(f"config `warmup_ticks` = {self.warmup_ticks!r}: expected an integer ≥ 0")
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> R4Config:

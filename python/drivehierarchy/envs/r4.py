@@ -1,9 +1,14 @@
 """`DriveHierarchy-R4`: the closed-loop rank as a Gymnasium environment over the Rust world.
 
 One `step()` is one policy decision: the action is held for `decision_interval_ticks` ticks of
-0.05 s (5 → the protocol's 4 Hz). Unlike the original runner, which applies zero control on ticks
-1–4 and first asks the policy at tick 5, this env asks at reset (t = 0): a Gymnasium policy always
-acts on the first observation. Scores are otherwise computed exactly as the protocol says.
+0.05 s (5 → the protocol's 4 Hz). As in the original runner, `reset()` plays ticks 1–4 with zero
+control and returns the state after tick 4 (`info["tick"] == 4`), where the policy is first asked
+(`warmup_ticks=0` asks at t = 0 instead).
+
+In decision mode an action is `[steer, target_speed_mps]`, or a raw VLM reply (`str`, parsed in
+Rust by the protocol's parser), or `None` for "no decision" (a transport error): a reply without
+a usable decision holds the previous control verbatim and counts in `parse_failures`. Each step's
+`info["reply"]` says what was received, parsed and applied; `sim.decision_log()` has them all.
 
 Rewards sum to the episode's S_R4 / 100: each step pays the gain in route score, and the last
 step adds the difference between the final composed score and the route score.
@@ -119,6 +124,8 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         return self._shape_obs(obs), info
 
     def step(self, action: Any) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
+        if action is None or isinstance(action, str):
+            return self.step_reply(action)
         arr = np.asarray(action, dtype=np.float64)
         expected = self.action_space.shape
         if arr.shape != expected:
@@ -128,6 +135,28 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         obs, reward, terminated, truncated, info = self._sim.step(arr)
         self._last_frame = None
         return self._shape_obs(obs), float(reward), bool(terminated), bool(truncated), info
+
+    def step_reply(self, reply: str | None) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
+        """One decision from a raw VLM reply (`None`: no reply at all, e.g. a transport error).
+
+        The reply is parsed in Rust by the protocol's parser (§2.3); when it yields no decision the
+        previous control is held verbatim (the steer rate-limit state untouched) and the failure is
+        counted in the score record's `parse_failures` and logged in `info["reply"]`.
+        """
+        if self.config.action_mode != "decision":
+            raise ConfigError(
+                f"config `action` = {reply!r}: raw replies need action_mode='decision' "
+                f"(this env is {self.config.action_mode!r})"
+            )
+        if reply is not None and not isinstance(reply, str):
+            raise ConfigError(f"config `action` = {reply!r}: a reply must be a str or None")
+        obs, reward, terminated, truncated, info = self._sim.step_reply(reply)
+        self._last_frame = None
+        return self._shape_obs(obs), float(reward), bool(terminated), bool(truncated), info
+
+    def decision_log(self) -> list[dict[str, Any]]:
+        """Every decision of the episode: decision, tick, raw reply, parsed action, failure, control."""
+        return self._sim.decision_log()
 
     def render(self) -> np.ndarray | None:  # type: ignore[override]
         if self.render_mode != "rgb_array":

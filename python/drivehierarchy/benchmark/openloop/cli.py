@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -31,10 +32,24 @@ def register(subparsers: Any) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress line on stderr")
     p.set_defaults(func=_cmd_predict)
 
-    p = sub.add_parser("score", help="score a run folder; writes DIR/evaluation/final_score.json")
-    p.add_argument("run_dir", type=Path)
+    p = sub.add_parser(
+        "score",
+        help="score a results folder (ours or the original runner's); writes DIR/evaluation/final_score.json",
+    )
+    p.add_argument(
+        "run_dir", type=Path, help="our run folder (predictions/) or the original's result_dir (*_pred.jsonl)"
+    )
     p.add_argument("--judge-model", default=None, help="local path of the Lingo-Judge model for R1_4")
+    p.add_argument(
+        "--skip-l1-4", action="store_true", help="skip R1_4 (judge) scoring, as the original's flag"
+    )
     p.add_argument("--strict-order", action="store_true", help="R3_2 without the original's label-fill quirk")
+    p.add_argument(
+        "--layout",
+        choices=("auto", "original", "drivehierarchy"),
+        default="auto",
+        help="folder layout (default: detected)",
+    )
     p.set_defaults(func=_cmd_score)
 
     p = sub.add_parser("calibrate", help="recompute task weights from a pool of models' task scores")
@@ -122,12 +137,33 @@ def _cmd_predict(args: argparse.Namespace) -> int:
 
 
 def _cmd_score(args: argparse.Namespace) -> int:
-    from .scoring import score_run
+    from .scoring import PredictionFileWarning, score_run
 
-    if not args.run_dir.is_dir():
-        raise ConfigError(f"{args.run_dir}: not a run folder")
-    result = score_run(args.run_dir, judge_model=args.judge_model, strict_order=args.strict_order)
+    with warnings.catch_warnings():
+        # Skipped lines are reported once, in the printed summary below.
+        warnings.simplefilter("ignore", PredictionFileWarning)
+        result = score_run(
+            args.run_dir,
+            judge_model=args.judge_model,
+            skip_l1_4=args.skip_l1_4,
+            strict_order=args.strict_order,
+            layout=args.layout,
+        )
     print(json.dumps(_headline(result), indent=2, ensure_ascii=False))
+    for f in result["per_file"]:
+        if f["skipped_lines"]:
+            print(
+                f"warning: {f['source_file']}: skipped {f['skipped_lines']} lines "
+                f"(scored {f['n']}); first: {f['first_skip']}",
+                file=sys.stderr,
+            )
+    for name, read in result["read"].items():
+        if read["duplicate_ids_counted"]:
+            print(
+                f"note: {name}: {read['duplicate_ids_counted']} repeated ids, each line counted "
+                "(as the original scorer does)",
+                file=sys.stderr,
+            )
     print(f"wrote {args.run_dir / 'evaluation' / 'final_score.json'}", file=sys.stderr)
     return 0
 
@@ -138,6 +174,18 @@ def _headline(result: dict[str, Any]) -> dict[str, Any]:
     from .report import extract_task_scores
 
     keep["tasks"] = extract_task_scores(result)
+    keep["skipped_files"] = result["skipped_files"]
+    skipped = {
+        f["source_file"]: {
+            "skipped_lines": f["skipped_lines"],
+            "first_skip": f["first_skip"],
+            "scored": f["n"],
+        }
+        for f in result["per_file"]
+        if f["skipped_lines"]
+    }
+    if skipped:
+        keep["skipped_lines"] = skipped
     return keep
 
 

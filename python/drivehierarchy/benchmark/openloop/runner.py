@@ -6,7 +6,9 @@ Output layout (the contract the scorer reads):
     OUT/predictions/<file_stem>.jsonl   one JSON object per line, appended and flushed per record
     OUT/errors.jsonl                    typed failure records (not predictions, so resume retries them)
 
-A prediction line is `{"id", "task", "prediction", "record", "model", "latency_s", "usage"}`.
+A prediction line is `{"id", "task", "prediction", "record", "model", "latency_s", "usage"}` plus
+the original runner's fields (`Question_id`/`task_id`, `question`, `ground_truth`,
+`model_prediction`, `ground_truth_order` for R3_2), so the original scorer reads it too.
 Kill the process at any moment: a restart drops a torn last line, skips ids already present and
 sends only the rest, so predict → kill → predict gives the same predictions as one run.
 """
@@ -38,8 +40,8 @@ from .catalog import (
     select_datasets,
 )
 from .client import ChatClient, DecodingConfig, ImageError, RequestFailure, image_data_url
-from .prompts import build_messages
-from .records import Record
+from .prompts import build_messages, question_text
+from .records import SEQUENCE_ORDER, Record
 
 MANIFEST_VERSION = 1
 
@@ -149,6 +151,23 @@ def _cut_torn_tail(path: Path, data: bytes | None = None) -> None:
             fh.truncate(end_ok)
 
 
+def original_fields(rec: Record, text: str) -> dict[str, Any]:
+    """The original runner's fields of a prediction line, as it writes them: `Question_id`
+    (plus `task_id` or `id` when that is the record's id field), `question` (the record's own,
+    else the text sent), `ground_truth` (the task's target field as is), `model_prediction`,
+    and `ground_truth_order` for ordering tasks. With them the original scorer reads our files."""
+    id_key = next((k for k in ("Question_id", "task_id", "id") if k in rec.raw), "id")
+    out: dict[str, Any] = {"Question_id": rec.id}
+    if id_key != "Question_id":
+        out[id_key] = rec.id
+    out["question"] = rec.question or question_text(rec)
+    out["ground_truth"] = rec.ground_truth
+    out["model_prediction"] = text
+    if rec.kind == SEQUENCE_ORDER and rec.raw.get("ground_truth_order") is not None:
+        out["ground_truth_order"] = rec.raw["ground_truth_order"]
+    return out
+
+
 def prediction_line(rec: Record, text: str, model: str, latency_s: float, usage: dict[str, Any]) -> str:
     obj = {
         "id": rec.id,
@@ -158,6 +177,7 @@ def prediction_line(rec: Record, text: str, model: str, latency_s: float, usage:
         "model": model,
         "latency_s": round(latency_s, 4),
         "usage": usage,
+        **original_fields(rec, text),
     }
     return json.dumps(obj, ensure_ascii=False) + "\n"
 
