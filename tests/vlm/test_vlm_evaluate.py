@@ -163,7 +163,7 @@ def test_a_scenario_without_any_valid_decision_aborts_the_batch(tmp_path: Path) 
 def test_server_down_or_model_not_served_fails_before_writing(tmp_path: Path) -> None:
     with ScriptedOpenAIServer(models=("other",)) as url, pytest.raises(ServerUnavailable, match="not served"):
         runner.evaluate(short_scenarios(1), tmp_path / "a", _opts(url), log=lambda _: None)
-    assert not (tmp_path / "a" / "manifest.json").exists()
+    assert not (tmp_path / "a").exists()
     with pytest.raises(ConfigError, match="needs a server"):
         runner.evaluate(short_scenarios(1), tmp_path / "b", runner.RunOptions(agent="vlm"), log=print)
 

@@ -620,7 +620,6 @@ async def evaluate_async(
         raise ConfigError("config `agent` = 'vlm': needs a server (--base-url and --model)")
     if not is_vlm:
         AGENTS.create(opts.agent)  # unknown names fail before anything is written
-    out.mkdir(parents=True, exist_ok=True)
     jobs = jobs_for(scenarios, opts.seed_list())
     check_manifest(out, opts)  # a directory of another run is refused before any request
     driver = None
@@ -628,7 +627,12 @@ async def evaluate_async(
         from drivehierarchy.agents.vlm.agent import VLMDriver
 
         driver = VLMDriver(opts.vlm)
-        await driver.transport.health_check()  # a clear error before anything is written
+        try:
+            await driver.transport.health_check()  # a clear error before anything is written
+        except BaseException:
+            await driver.transport.aclose()
+            raise
+    out.mkdir(parents=True, exist_ok=True)
     write_manifest(out, jobs, opts)
     done = read_results(out)
     index = {j.key: i for i, j in enumerate(jobs, 1)}
