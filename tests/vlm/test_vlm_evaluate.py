@@ -220,9 +220,12 @@ def test_cli_evaluate_and_report(tmp_path: Path, suite_dir: Path, capsys: pytest
     with ScriptedOpenAIServer(route_driver, models=("Qwen/Qwen3-VL-8B-Instruct",)) as url:
         argv = ["r4", "evaluate", "--agent", "vlm", "--base-url", url, "--model", "qwen3-vl-8b",
                 "--suite", str(suite_dir), "--out", str(out), "--jobs", "3"]  # fmt: skip
-        assert main(argv) == 0
-        assert "| **R4 (mean of categories)** | 3 |" in capsys.readouterr().out
+        assert main([*argv, "--progress"]) == 0
+        first = capsys.readouterr()
+        assert "| **R4 (mean of categories)** | 3 |" in first.out
+        assert "3/3" in first.err and "mean_S_R4=" in first.err and "parse_fail=0" in first.err  # tqdm bar
         assert main(argv) == 0  # resumed: nothing to redo
+        assert capsys.readouterr().out.count("done before, skipped") == 3
         assert main([*argv[:7], "not-served", *argv[8:]]) == 2
         assert "belongs to another run" in capsys.readouterr().err
         assert main([*argv[:7], "not-served", *argv[8:-3], str(tmp_path / "new"), "--jobs", "3"]) == 2
