@@ -18,16 +18,17 @@ from pathlib import Path
 import pytest
 
 from conftest import short_scenarios
-
-pytest.importorskip("fastapi")
-pytest.importorskip("uvicorn")
-pytest.importorskip("torchvision")  # the Qwen2-VL processor's video half needs it
-
 from drivehierarchy.agents.base import run_episode
 from drivehierarchy.agents.vlm import VLMAgent, VLMOptions
 from drivehierarchy.agents.vlm.transport import DecodingConfig
 from drivehierarchy.benchmark.r4 import runner
 from drivehierarchy.envs.r4 import DriveHierarchyR4Env
+
+pytestmark = pytest.mark.serving
+
+pytest.importorskip("fastapi")
+pytest.importorskip("uvicorn")
+pytest.importorskip("torchvision")  # the Qwen2-VL processor's video half needs it
 
 
 def _free_port() -> int:

@@ -12,6 +12,8 @@ from drivehierarchy.agents.vlm import VLMOptions
 from drivehierarchy.benchmark.r4 import runner
 from drivehierarchy.testing.openai_server import ScriptedOpenAIServer, route_driver
 
+pytestmark = pytest.mark.ray
+
 ray = pytest.importorskip("ray")
 
 
