@@ -22,7 +22,7 @@ use crate::score::{
     TrajectorySample,
 };
 use crate::view::{ActorView, LightColor, TrafficLightView};
-use crate::world::World;
+use crate::world::{TrafficModel, World};
 use crate::{Error, Result, DECISION_INTERVAL_TICKS};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -269,6 +269,8 @@ pub struct Sim {
     /// (arc length on the route, index into the world's light views) of the route's signal heads.
     route_lights: Vec<(f64, usize)>,
     episode: Option<Episode>,
+    /// Background-traffic model for the next episode (moves into its world at reset).
+    traffic: Option<Box<dyn TrafficModel>>,
 }
 
 #[derive(Debug)]
@@ -315,6 +317,7 @@ impl Sim {
             tracker,
             route_lights: Vec::new(),
             episode: None,
+            traffic: None,
         })
     }
 
@@ -338,7 +341,8 @@ impl Sim {
 
     /// Starts a new episode from t = 0 and plays the warm-up ticks with zero control.
     pub fn reset(&mut self, seed: u64) -> Result<(Observation, StepInfo)> {
-        let world = World::new(&self.scenario, seed)?;
+        let mut world = World::new(&self.scenario, seed)?;
+        self.start_traffic(&mut world)?;
         let route = self.tracker.route().clone();
         let start = self.scenario.ego.start.pos;
         let on_road = self.scenario.map.drivable().is_drivable(start);
@@ -459,6 +463,35 @@ impl Sim {
     /// Every decision of the running episode so far.
     pub fn decision_log(&self) -> Result<&[DecisionRecord]> {
         self.episode.as_ref().map(|e| e.decision_log.as_slice()).ok_or_else(not_started)
+    }
+
+    /// Sets the background-traffic model used from the next `reset` on (`None`: no traffic).
+    pub fn set_traffic(&mut self, model: Option<Box<dyn TrafficModel>>) {
+        if let Some(ep) = self.episode.as_mut() {
+            ep.world.detach_traffic();
+        }
+        self.traffic = model;
+    }
+
+    /// Name of the traffic model in use ("sumo", "native"), if any.
+    pub fn traffic_name(&self) -> Option<&str> {
+        match &self.traffic {
+            Some(m) => Some(m.name()),
+            None => self.episode.as_ref().and_then(|e| e.world.traffic_name()),
+        }
+    }
+
+    /// Moves the traffic model (set, or kept from the previous episode) into `world` and starts
+    /// it; on failure the model is kept for the next try.
+    fn start_traffic(&mut self, world: &mut World) -> Result<()> {
+        let model =
+            self.traffic.take().or_else(|| self.episode.as_mut().and_then(|e| e.world.detach_traffic()));
+        let Some(model) = model else { return Ok(()) };
+        let res = world.attach_traffic(model);
+        if res.is_err() {
+            self.traffic = world.detach_traffic();
+        }
+        res
     }
 
     fn route_score(&self) -> f64 {

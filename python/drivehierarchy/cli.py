@@ -9,9 +9,11 @@ import sys
 # Area modules, each with `register(subparsers)` adding its commands; every command sets
 # `func(args) -> int` on its parser.
 _AREAS = (
+    "drivehierarchy.baselines.cli",
     "drivehierarchy.benchmark.openloop.cli",
     "drivehierarchy.benchmark.r4.cli",
     "drivehierarchy.scenario_cli",
+    "drivehierarchy.map_cli",
 )
 
 

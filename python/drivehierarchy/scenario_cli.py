@@ -1,29 +1,85 @@
-"""`drivehierarchy scenario ...`: validate and list scenario files."""
+"""`drivehierarchy scenario ...`: validate, list, show, preview and import scenario files."""
 
 from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
+from typing import Any
+
+import tomllib
 
 from drivehierarchy import DriveHierarchyError, _core
-from drivehierarchy.scenarios import builtin_scenarios, scenario_id, sumo_home
+from drivehierarchy._core import ConfigError
+from drivehierarchy.scenarios import builtin_scenarios, resolve_scenario, scenario_id, sumo_home
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     sc = sub.add_parser("scenario", help="scenario files")
     cmds = sc.add_subparsers(dest="scenario_command", required=True)
     v = cmds.add_parser("validate", help="check scenario files; exit 1 if any is invalid")
-    v.add_argument("files", nargs="+")
+    v.add_argument("files", nargs="+", help="scenario files or folders (every */*.toml and *.toml)")
     v.set_defaults(func=_validate)
-    ls = cmds.add_parser("list", help="list the built-in scenarios")
+
+    ls = cmds.add_parser("list", help="list the built-in scenarios, or those of a folder")
+    ls.add_argument("dir", nargs="?", type=Path, help="a folder of <category>/<name>.toml files")
+    ls.add_argument("--json", action="store_true", help="one JSON object per line")
     ls.set_defaults(func=_list)
+
+    sh = cmds.add_parser("show", help="print a scenario's resolved summary (route, actors, traffic)")
+    sh.add_argument("scenario", help="scenario file or built-in id")
+    sh.add_argument("--json", action="store_true")
+    sh.set_defaults(func=_show)
+
+    pv = cmds.add_parser("preview", help="write the start state's front camera and BEV as PNGs")
+    pv.add_argument("scenario", help="scenario file or built-in id")
+    pv.add_argument("--out", type=Path, default=Path("."), help="output folder (default: .)")
+    pv.add_argument("--seed", type=int, default=0)
+    pv.set_defaults(func=_preview)
+
+    im = cmds.add_parser(
+        "import-official",
+        help="convert the original release's scenes (entity_sumo.json) into scenario files",
+        description=(
+            "Converts every <category>/<scene id>/entity_sumo.json under DIR (with entity.json "
+            "beside it) into OUT/<category>/<scene id>.toml on your copy of the road network, "
+            "copies the vehicle-type file into OUT, and writes OUT/import_report.json. Exit 1 if "
+            "a scene cannot be imported (or, with --strict, if any actor could not be mapped)."
+        ),
+    )
+    im.add_argument("dir", type=Path, help="folder of the original scenes (e.g. Scenario_Onsite)")
+    im.add_argument("--net", type=Path, required=True, help="the road network (tongji.net.xml)")
+    im.add_argument("--out", type=Path, required=True, help="output folder (yours; files are overwritten)")
+    im.add_argument(
+        "--vtypes",
+        type=Path,
+        help="SUMO vehicle types (carlavtypes13.rou.xml; default: that file beside --net, if present)",
+    )
+    im.add_argument("--copy-net", action="store_true", help="copy the network into OUT (self-contained)")
+    im.add_argument("--strict", action="store_true", help="exit 1 when any actor could not be mapped")
+    im.add_argument("--json", action="store_true", help="print the report as JSON")
+    im.set_defaults(func=_import_official)
+
+
+def _expand(items: list[str]) -> list[Path]:
+    out: list[Path] = []
+    for it in items:
+        p = Path(it)
+        if p.is_dir():
+            found = sorted(p.glob("*/*.toml")) + sorted(p.glob("*.toml"))
+            if not found:
+                raise ConfigError(f"{p}: no scenario files (*.toml) in this folder")
+            out.extend(found)
+        else:
+            out.append(p)
+    return out
 
 
 def _validate(args: argparse.Namespace) -> int:
     bad = 0
-    for f in args.files:
+    for f in _expand(args.files):
         try:
-            summary = json.loads(_core.validate_scenario(f, sumo_home()))
+            summary = json.loads(_core.validate_scenario(str(f), sumo_home()))
         except DriveHierarchyError as exc:
             bad += 1
             print(f"INVALID {exc}")
@@ -32,7 +88,91 @@ def _validate(args: argparse.Namespace) -> int:
     return 1 if bad else 0
 
 
+def _toml(path: Path) -> dict[str, Any]:
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, tomllib.TOMLDecodeError):
+        return {}
+
+
 def _list(args: argparse.Namespace) -> int:
-    for p in builtin_scenarios():
-        print(scenario_id(p))
+    if args.dir is None:
+        paths = builtin_scenarios()
+        ids = [scenario_id(p) for p in paths]
+    else:
+        if not args.dir.is_dir():
+            raise ConfigError(f"{args.dir}: not a folder")
+        paths = sorted(args.dir.glob("*/*.toml"))
+        if not paths:
+            raise ConfigError(f"{args.dir}: no scenario files (<category>/<name>.toml)")
+        ids = [str(p) for p in paths]
+    for sid, p in zip(ids, paths, strict=True):
+        doc = _toml(p)
+        if args.json:
+            row = {
+                "id": sid,
+                "category": doc.get("category"),
+                "map": doc.get("map"),
+                "description": doc.get("description", ""),
+            }
+            print(json.dumps(row, ensure_ascii=False))
+        else:
+            print(f"{sid}\t{doc.get('description', '')}")
+    return 0
+
+
+def _show(args: argparse.Namespace) -> int:
+    path = Path(resolve_scenario(args.scenario))
+    summary = json.loads(_core.validate_scenario(str(path), sumo_home()))
+    doc = _toml(path)
+    summary["description"] = doc.get("description", "")
+    summary["duration_s"] = doc.get("duration_s")
+    summary["scripted_actors"] = [
+        {"name": a.get("name"), "kind": a.get("kind"), "start": a.get("start", {"time_s": 0})}
+        for a in doc.get("actors", [])
+    ]
+    if args.json:
+        print(json.dumps(summary, indent=2, ensure_ascii=False, sort_keys=True))
+        return 0
+    print(f"{summary['id']}  ({summary['category']})  {summary['name']}")
+    if summary["description"]:
+        print(f"  {summary['description']}")
+    print(f"  file: {path}")
+    print(f"  map: {summary['map']}  ({summary['traffic_lights']} signal heads)")
+    print(f"  route: {len(summary['route_edges'])} edges, {summary['route_length_m']:.1f} m")
+    dur = summary["duration_s"]
+    print(
+        f"  T_ref: {summary['reference_duration_s']:.1f} s"
+        + (f", scenario duration {dur:.1f} s (timeout {2 * dur:.1f} s)" if dur else "")
+    )
+    print(f"  actors: {summary['actors']}, obstacles: {summary['obstacles']}, signs: {summary['signs']}")
+    for a in summary["scripted_actors"]:
+        print(f"    - {a['kind']}: {a['name'] or ''}  start {json.dumps(a['start'])}")
+    print(f"  traffic: {summary['traffic']}")
+    return 0
+
+
+def _preview(args: argparse.Namespace) -> int:
+    from drivehierarchy.benchmark.r4.gallery import render_start
+
+    path = Path(resolve_scenario(args.scenario))
+    args.out.mkdir(parents=True, exist_ok=True)
+    entry = render_start(path, args.out, seed=args.seed)
+    for view in ("front", "bev"):
+        print(args.out / entry.files[view])
+    return 0
+
+
+def _import_official(args: argparse.Namespace) -> int:
+    from drivehierarchy.scenario_import import import_official
+
+    report = import_official(args.dir, args.net, args.out, vtypes=args.vtypes, copy_net=args.copy_net)
+    if args.json:
+        print(json.dumps(report.to_json(), indent=2, ensure_ascii=False))
+    else:
+        for line in report.lines():
+            print(line)
+        print(f"report: {Path(report.out) / 'import_report.json'}")
+    if report.failed or (args.strict and report.unmapped_count):
+        return 1
     return 0

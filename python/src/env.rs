@@ -3,6 +3,7 @@
 
 use crate::errors::to_pyerr;
 use crate::json::to_py;
+use crate::traffic::SumoBridge;
 use dh_agents::expert::{Expert, ExpertParams};
 use dh_env::drive::{ActuationBridge, Control, Decision, DecisionFailure};
 use dh_env::render::{BevConfig, CameraConfig, GifWriter, Image};
@@ -244,6 +245,94 @@ impl PySim {
     #[getter]
     fn trajectory_hash(&self, py: Python<'_>) -> PyResult<String> {
         self.inner.trajectory_hash().map_err(|e| err(py, e))
+    }
+
+    /// Background traffic from the next `reset` on: `"none"`, `"native"` (the Rust IDM model),
+    /// or `"sumo"` with `sumo` = the object owning libsumo (`envs.traffic.SumoTraffic`).
+    #[pyo3(signature = (mode, sumo=None))]
+    fn set_traffic(&mut self, py: Python<'_>, mode: &str, sumo: Option<Py<PyAny>>) -> PyResult<()> {
+        let model: Option<Box<dyn dh_env::world::TrafficModel>> = match (mode, sumo) {
+            ("none", None) => None,
+            ("native", None) => Some(Box::new(
+                dh_env::world::idm::IdmTraffic::new(self.inner.scenario()).map_err(|e| err(py, e))?,
+            )),
+            ("sumo", Some(obj)) => Some(Box::new(SumoBridge::new(obj, self.inner.scenario()))),
+            (m, s) => {
+                let why = match m {
+                    "sumo" => "mode 'sumo' needs the SumoTraffic object",
+                    "none" | "native" => "only mode 'sumo' takes a SUMO object",
+                    _ => "expected 'sumo', 'native' or 'none'",
+                };
+                let value = if s.is_some() { format!("{m} (with a SUMO object)") } else { m.to_string() };
+                return Err(err(py, dh_env::Error::config("traffic", value, why)));
+            }
+        };
+        self.inner.set_traffic(model);
+        Ok(())
+    }
+
+    /// The scenario's `[traffic]` mode ("none" when it has no table).
+    #[getter]
+    fn scenario_traffic_mode(&self) -> &'static str {
+        self.inner.scenario().traffic.mode.as_str()
+    }
+
+    /// The traffic model in use ("sumo", "native") or None.
+    #[getter]
+    fn traffic(&self) -> Option<String> {
+        self.inner.traffic_name().map(str::to_owned)
+    }
+
+    /// The SUMO route file the co-simulation would load for an episode seed.
+    fn traffic_routes(&self, seed: u64) -> String {
+        let s = self.inner.scenario();
+        s.traffic.sumo_routes_xml(&s.map, seed, &s.ego, &dh_env::scenario::traffic::mirror_specs(&s.actors))
+    }
+
+    /// Active actors as rows `[id, x, y, yaw, speed_mps, length_m, width_m, is_traffic, signals]`.
+    fn actors_array<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, numpy::PyArray2<f64>>> {
+        let world = self.inner.world().map_err(|e| err(py, e))?;
+        let rows: Vec<Vec<f64>> = world
+            .actors()
+            .iter()
+            .map(|a| {
+                vec![
+                    f64::from(a.id),
+                    a.pose.pos.x,
+                    a.pose.pos.y,
+                    a.pose.yaw,
+                    a.speed_mps,
+                    a.length_m,
+                    a.width_m,
+                    if world.is_traffic_actor(a.id) { 1.0 } else { 0.0 },
+                    f64::from(world.actor_signals(a.id)),
+                ]
+            })
+            .collect();
+        let flat: Vec<f64> = rows.concat();
+        let arr = numpy::ndarray::Array2::from_shape_vec((rows.len(), 9), flat)
+            .map_err(|e| err(py, dh_env::Error::Simulation(e.to_string())))?;
+        Ok(arr.into_pyarray(py))
+    }
+
+    /// The ego as `[x, y, yaw, speed_mps, length_m, width_m]`.
+    fn ego_array<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let world = self.inner.world().map_err(|e| err(py, e))?;
+        let e = world.ego();
+        Ok(PyArray1::from_vec(
+            py,
+            vec![e.pose.pos.x, e.pose.pos.y, e.pose.yaw, e.speed_mps, e.length_m, e.width_m],
+        ))
+    }
+
+    /// Light states of every signal head: `[(tl_id, lane_id, colour)]`.
+    fn light_states(&self, py: Python<'_>) -> PyResult<Vec<(String, String, String)>> {
+        let world = self.inner.world().map_err(|e| err(py, e))?;
+        Ok(world
+            .lights()
+            .iter()
+            .map(|l| (l.tl_id.clone(), l.lane_id.clone(), format!("{:?}", l.color).to_lowercase()))
+            .collect())
     }
 }
 

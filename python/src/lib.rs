@@ -6,6 +6,7 @@ mod benchmark;
 mod env;
 mod errors;
 mod json;
+mod traffic;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -4,6 +4,7 @@
 pub mod parse;
 pub mod resolve;
 pub mod schema;
+pub mod traffic;
 
 pub use parse::{parse_scenario_file, parse_scenario_str};
 pub use resolve::{
@@ -13,6 +14,7 @@ pub use resolve::{
     SNAP_DISTANCE_M, SUMO_PREFIX,
 };
 pub use schema::{ScenarioFile, CATEGORIES, SCENARIO_VERSION};
+pub use traffic::{TrafficDemand, TrafficMode};
 
 use crate::Result;
 use serde::Serialize;
@@ -53,6 +55,8 @@ pub struct Summary {
     pub signs: usize,
     /// Signal heads (controlled incoming lanes) in the map.
     pub traffic_lights: usize,
+    /// Background traffic: mode and demand (`[traffic]`).
+    pub traffic: String,
 }
 
 impl Summary {
@@ -71,8 +75,24 @@ impl Summary {
             obstacles,
             signs: s.signs.len(),
             traffic_lights: crate::world::lights::signal_heads(&s.map).len(),
+            traffic: traffic_summary(&s.traffic),
         }
     }
+}
+
+fn traffic_summary(t: &TrafficDemand) -> String {
+    if t.mode == TrafficMode::None && t.is_empty() {
+        return "none".into();
+    }
+    let random =
+        t.random.as_ref().map_or(String::new(), |r| format!(", random trips {}/lane-km", r.density_per_km));
+    format!(
+        "{}: {} vehicles, {} flows{random}, warm-up {} s",
+        t.mode.as_str(),
+        t.vehicles.len(),
+        t.flows.len(),
+        t.warmup_s
+    )
 }
 
 impl std::fmt::Display for Summary {
@@ -91,8 +111,8 @@ impl std::fmt::Display for Summary {
         writeln!(f, "  T_ref     {:.1} s", self.reference_duration_s)?;
         write!(
             f,
-            "  actors    {} scripted/external, {} obstacles, {} signs, {} signal heads in the map",
-            self.actors, self.obstacles, self.signs, self.traffic_lights
+            "  actors    {} scripted/external, {} obstacles, {} signs, {} signal heads in the map\n  traffic   {}",
+            self.actors, self.obstacles, self.signs, self.traffic_lights, self.traffic
         )
     }
 }

@@ -192,6 +192,8 @@ pub struct ResolvedScenario {
     /// Scripted/external actors in file order, then obstacles in file order.
     pub actors: Vec<ResolvedActor>,
     pub signs: Vec<SignView>,
+    /// Background-traffic demand (`[traffic]`; mode `none` when absent).
+    pub traffic: crate::scenario::traffic::TrafficDemand,
 }
 
 impl ResolvedScenario {
@@ -994,6 +996,7 @@ pub fn resolve(file: &Path, spec: &ScenarioFile, opts: &LoadOptions) -> Result<R
     }
     let signs =
         spec.signs.iter().enumerate().map(|(i, s)| resolve_sign(&ctx, i, s)).collect::<Result<Vec<_>>>()?;
+    let traffic = crate::scenario::traffic::resolve_traffic(file, &map, spec.traffic.as_ref(), &ego.route)?;
     Ok(ResolvedScenario {
         file: file.to_path_buf(),
         id: spec.id.clone(),
@@ -1009,5 +1012,6 @@ pub fn resolve(file: &Path, spec: &ScenarioFile, opts: &LoadOptions) -> Result<R
         ego,
         actors,
         signs,
+        traffic,
     })
 }

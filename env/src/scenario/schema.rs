@@ -53,6 +53,9 @@ pub struct ScenarioFile {
     pub actors: Vec<ActorSpec>,
     #[serde(default)]
     pub signs: Vec<SignSpec>,
+    /// Background traffic (`[traffic]`, see `docs/traffic.md`).
+    #[serde(default)]
+    pub traffic: Option<crate::scenario::traffic::TrafficSpec>,
 }
 
 /// A point (and optionally a heading) either on a lane (`lane` + `s` + `offset_m`) or in

@@ -66,6 +66,8 @@ struct Program {
     ends: Vec<f64>,
     states: Vec<Vec<LightColor>>,
     phase: usize,
+    /// State set from outside (a traffic model running the programs, e.g. SUMO).
+    external: Option<Vec<LightColor>>,
 }
 
 impl Program {
@@ -77,6 +79,9 @@ impl Program {
         self.ends.partition_point(|&e| e <= pos).min(self.states.len() - 1)
     }
     fn color(&self, link: usize) -> LightColor {
+        if let Some(e) = &self.external {
+            return e.get(link).copied().unwrap_or(LightColor::Off);
+        }
         self.states.get(self.phase).and_then(|s| s.get(link)).copied().unwrap_or(LightColor::Off)
     }
 }
@@ -110,7 +115,14 @@ impl LightState {
             }
             let states =
                 phases.iter().map(|p| p.state.chars().map(LightColor::from_sumo).collect()).collect();
-            programs.push(Program { offset_s, cycle_s: acc, ends, states, phase: usize::MAX });
+            programs.push(Program {
+                offset_s,
+                cycle_s: acc,
+                ends,
+                states,
+                phase: usize::MAX,
+                external: None,
+            });
         }
         let mut heads = Vec::with_capacity(heads_spec.len());
         let mut views = Vec::with_capacity(heads_spec.len());
@@ -149,6 +161,26 @@ impl LightState {
             view.color =
                 links.iter().map(|&l| p.color(l)).max_by_key(|&c| rank(c)).unwrap_or(LightColor::Off);
         }
+    }
+
+    /// Sets light `tl_id` to a SUMO state string (one character per link index), overriding its
+    /// program from now on; returns false if the light is unknown.
+    pub fn set_external(&mut self, tl_id: &str, state: &str) -> bool {
+        let Some(pi) = self.tl_ids.iter().position(|t| t == tl_id) else { return false };
+        let cols: Vec<LightColor> = state.chars().map(LightColor::from_sumo).collect();
+        let p = &mut self.programs[pi];
+        if p.external.as_ref() == Some(&cols) {
+            return true;
+        }
+        p.external = Some(cols);
+        for (view, (hp, links)) in self.views.iter_mut().zip(&self.heads) {
+            if *hp == pi {
+                let p = &self.programs[pi];
+                view.color =
+                    links.iter().map(|&l| p.color(l)).max_by_key(|&c| rank(c)).unwrap_or(LightColor::Off);
+            }
+        }
+        true
     }
 
     pub fn views(&self) -> &[TrafficLightView] {

@@ -18,10 +18,13 @@
 //! behaviours that will need it).
 
 pub mod collision;
+pub mod idm;
 pub mod lights;
+pub mod traffic;
 pub mod vehicle;
 
 pub use lights::{signal_heads, LightState, SignalHead};
+pub use traffic::{TrafficAgent, TrafficFrame, TrafficInput, TrafficModel};
 pub use vehicle::{longitudinal_accel, sanitize_control, step_bicycle, EgoState, VehicleParams};
 
 use crate::geom::{Pose, Vec2};
@@ -32,6 +35,7 @@ use crate::{Error, Result, DT_S};
 use collision::CollisionWorld;
 use rapier2d::prelude::ColliderHandle;
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use std::sync::Arc;
 pub use vehicle::Control;
 
@@ -85,6 +89,8 @@ enum Motion {
     Static,
     Scripted(Box<ScriptedPath>),
     External,
+    /// Moved by the traffic model (key of the model's vehicle).
+    Traffic(u64),
 }
 
 #[derive(Debug, Clone)]
@@ -98,6 +104,9 @@ struct ActorRt {
     brake_pending: bool,
     /// Removed from the world (end of path with `at_end = remove`, or despawned).
     removed: bool,
+    /// Traffic vehicles: the last frame that listed it, and its signal bits.
+    traffic_frame: u64,
+    signals: u32,
 }
 
 /// The simulated world of one episode.
@@ -115,6 +124,13 @@ pub struct World {
     tick: u64,
     collision: CollisionWorld,
     contact_ids: Vec<u32>,
+    /// Number of scenario actors (ids 1..=n); traffic and runtime actors come after.
+    scenario_actors: u32,
+    traffic: Option<Box<dyn TrafficModel>>,
+    traffic_buf: TrafficFrame,
+    /// Traffic key → actor id of the vehicles present.
+    traffic_ids: BTreeMap<u64, u32>,
+    traffic_frames: u64,
 }
 
 /// Smooth heading along a path: direction of the chord over ±`h` around `s`.
@@ -182,8 +198,11 @@ impl World {
                 triggered_at_s: 0.0,
                 brake_pending,
                 removed: false,
+                traffic_frame: 0,
+                signals: 0,
             });
         }
+        let scenario_actors = actors.len() as u32;
         let mut w = World {
             map: scenario.map.clone(),
             params,
@@ -197,6 +216,11 @@ impl World {
             tick: 0,
             collision,
             contact_ids: Vec::with_capacity(8),
+            scenario_actors,
+            traffic: None,
+            traffic_buf: TrafficFrame::default(),
+            traffic_ids: BTreeMap::new(),
+            traffic_frames: 0,
         };
         w.rebuild_views();
         Ok(w)
@@ -220,9 +244,10 @@ impl World {
         // 3. Time.
         self.tick += 1;
         let t = self.time_s();
-        // 4. Lights, then red-light running by the ego centre.
-        self.lights.update(t);
-        let ran_red_light = crossed_red_stop_line(self.lights.views(), prev_pos, self.ego.pose);
+        // 4. Lights (unless the traffic model drives them, below).
+        if !self.traffic.as_ref().is_some_and(|m| m.drives_lights()) {
+            self.lights.update(t);
+        }
         // 5. Actors.
         let mut triggered = Vec::new();
         let ego_pos = self.ego.pose.pos;
@@ -259,6 +284,9 @@ impl World {
                 *view = a.view;
             }
         }
+        // 5b. Background traffic (sees this tick's ego and actors), then red-light running.
+        self.step_traffic(None)?;
+        let ran_red_light = crossed_red_stop_line(self.lights.views(), prev_pos, self.ego.pose);
         // 6. Collisions.
         self.collision.set_ego_pose(self.ego.pose);
         self.contact_ids.clear();
@@ -340,9 +368,163 @@ impl World {
             triggered_at_s: self.time_s(),
             brake_pending: false,
             removed: false,
+            traffic_frame: 0,
+            signals: 0,
         });
         self.views.push(view);
         Ok(id)
+    }
+
+    /// Plugs a traffic model in and starts it (the vehicles present at t = 0 appear now).
+    /// On error the model stays attached (take it back with [`World::detach_traffic`]).
+    pub fn attach_traffic(&mut self, model: Box<dyn TrafficModel>) -> Result<()> {
+        self.traffic = Some(model);
+        self.step_traffic(Some(self.seed))
+    }
+
+    /// Unplugs the traffic model (its vehicles stay where they are).
+    pub fn detach_traffic(&mut self) -> Option<Box<dyn TrafficModel>> {
+        self.traffic.take()
+    }
+
+    /// Name of the attached traffic model, if any.
+    pub fn traffic_name(&self) -> Option<&str> {
+        self.traffic.as_deref().map(|m| m.name())
+    }
+
+    /// Runs the model for this tick (`start` = `Some(seed)`: its start) and applies its frame.
+    fn step_traffic(&mut self, start: Option<u64>) -> Result<()> {
+        let Some(mut model) = self.traffic.take() else { return Ok(()) };
+        let n = self.views.partition_point(|v| v.id <= self.scenario_actors);
+        let input = TrafficInput {
+            tick: self.tick,
+            time_s: self.time_s(),
+            ego: &self.ego_view,
+            actors: &self.views[..n],
+            map: &self.map,
+            lights: self.lights.views(),
+        };
+        self.traffic_buf.clear();
+        let res = match start {
+            Some(seed) => model.start(&input, seed, &mut self.traffic_buf),
+            None => model.tick(&input, &mut self.traffic_buf),
+        };
+        self.traffic = Some(model);
+        res?;
+        self.apply_traffic()
+    }
+
+    /// Applies the traffic frame in `traffic_buf`: updates, spawns and removes traffic actors
+    /// and sets changed light states.
+    fn apply_traffic(&mut self) -> Result<()> {
+        let frame = std::mem::take(&mut self.traffic_buf);
+        self.traffic_frames += 1;
+        let gen = self.traffic_frames;
+        let mut changed = false;
+        for a in &frame.agents {
+            if !(a.pose.pos.is_finite() && a.pose.yaw.is_finite() && a.speed_mps.is_finite()) {
+                return Err(Error::Simulation(format!(
+                    "traffic vehicle {} has a non-finite pose {a:?}",
+                    a.key
+                )));
+            }
+            match self.traffic_ids.get(&a.key) {
+                Some(&id) => {
+                    let rt = &mut self.actors[id as usize - 1];
+                    rt.view.pose = a.pose;
+                    rt.view.speed_mps = a.speed_mps;
+                    rt.view.braking = a.signals & traffic::SIGNAL_BRAKELIGHT != 0;
+                    rt.signals = a.signals;
+                    rt.traffic_frame = gen;
+                    let h = rt.collider;
+                    self.collision.set_pose(h, a.pose);
+                }
+                None => {
+                    let id = u32::try_from(self.actors.len() + 1)
+                        .map_err(|_| Error::Simulation("too many actors".into()))?;
+                    if !(a.length_m > 0.0
+                        && a.width_m > 0.0
+                        && a.length_m.is_finite()
+                        && a.width_m.is_finite())
+                    {
+                        return Err(Error::Simulation(format!(
+                            "traffic vehicle {} has a bad size {a:?}",
+                            a.key
+                        )));
+                    }
+                    let view = ActorView {
+                        id,
+                        kind: a.kind,
+                        pose: a.pose,
+                        speed_mps: a.speed_mps.max(0.0),
+                        length_m: a.length_m,
+                        width_m: a.width_m,
+                        height_m: a.height_m,
+                        color: a.color,
+                        braking: a.signals & traffic::SIGNAL_BRAKELIGHT != 0,
+                    };
+                    let collider = self.collision.add_actor(id, a.pose, a.length_m, a.width_m);
+                    self.actors.push(ActorRt {
+                        view,
+                        motion: Motion::Traffic(a.key),
+                        collider,
+                        s: 0.0,
+                        phase: Phase::Moving,
+                        triggered_at_s: self.time_s(),
+                        brake_pending: false,
+                        removed: false,
+                        traffic_frame: gen,
+                        signals: a.signals,
+                    });
+                    self.traffic_ids.insert(a.key, id);
+                    changed = true;
+                }
+            }
+        }
+        if self.traffic_ids.len() > frame.agents.len() || changed {
+            let actors = &mut self.actors;
+            let collision = &mut self.collision;
+            self.traffic_ids.retain(|_, id| {
+                let rt = &mut actors[*id as usize - 1];
+                if rt.traffic_frame == gen {
+                    return true;
+                }
+                rt.removed = true;
+                collision.set_enabled(rt.collider, false);
+                changed = true;
+                false
+            });
+        }
+        for (tl, state) in &frame.lights {
+            self.lights.set_external(tl, state);
+        }
+        if changed {
+            self.rebuild_views();
+        } else {
+            for (view, a) in self.views.iter_mut().zip(self.actors.iter().filter(|a| !a.removed)) {
+                *view = a.view;
+            }
+        }
+        self.traffic_buf = frame;
+        Ok(())
+    }
+
+    /// Signal bits of a traffic vehicle (0 for other actors; see [`traffic::SIGNAL_BRAKELIGHT`]).
+    pub fn actor_signals(&self, id: u32) -> u32 {
+        self.actor_index(id).map_or(0, |i| self.actors[i].signals)
+    }
+
+    /// Whether actor `id` is a background-traffic vehicle.
+    pub fn is_traffic_actor(&self, id: u32) -> bool {
+        self.traffic_key(id).is_some()
+    }
+
+    /// The traffic model's key of actor `id` (None unless it is a traffic vehicle).
+    pub fn traffic_key(&self, id: u32) -> Option<u64> {
+        match self.actors.get(self.actor_index(id)?)?.motion {
+            Motion::Traffic(key) => Some(key),
+            _ => None,
+        }
     }
 
     /// Removes an actor (its collider too); ids are never reused.

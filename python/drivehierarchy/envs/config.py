@@ -55,8 +55,15 @@ class R4Config:
     front: CameraConfig | None = field(default_factory=CameraConfig)
     bev: BevConfig | None = field(default_factory=BevConfig)
     prompt: bool = True
+    # Background traffic: "sumo" | "native" | "none"; None = the scenario's `[traffic]` mode.
+    traffic: str | None = None
 
     def __post_init__(self) -> None:
+        if self.traffic not in (None, "sumo", "native", "none"):
+            raise ConfigError(
+                f"config `traffic` = {self.traffic!r}: expected 'sumo', 'native', 'none' or None "
+                "(the scenario's mode)"
+            )
         if self.action_mode not in ("decision", "raw"):
             raise ConfigError(f"config `action_mode` = {self.action_mode!r}: expected 'decision' or 'raw'")
         if not isinstance(self.decision_interval_ticks, int) or self.decision_interval_ticks < 1:
@@ -80,6 +87,7 @@ class R4Config:
         """The form the Rust core reads (the scenario travels separately)."""
         d = dataclasses.asdict(self)
         d.pop("scenario")
+        d.pop("traffic")  # handled by the Python env (envs/traffic), not the Rust config
         return json.dumps(d)
 
     def replace(self, **changes: Any) -> R4Config:

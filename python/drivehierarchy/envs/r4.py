@@ -27,6 +27,7 @@ from gymnasium import spaces
 from drivehierarchy import _core
 from drivehierarchy._core import ConfigError
 from drivehierarchy.envs.config import R4Config
+from drivehierarchy.envs.traffic import SumoTraffic, resolve_traffic_mode
 from drivehierarchy.scenarios import resolve_scenario, sumo_home
 
 STATE_FIELDS: tuple[str, ...] = tuple(_core.STATE_FIELDS)
@@ -60,6 +61,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         self.render_mode = render_mode
         self._sim: Any = None
         self._scenario_path: str | None = None
+        self._sumo: SumoTraffic | None = None
         self._load(config.scenario)
 
         obs: dict[str, spaces.Space[Any]] = {}
@@ -92,6 +94,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
             return
         self._sim = _core.Sim(path, self.config.to_json(), sumo_home())
         self._scenario_path = path
+        self._configure_traffic()
 
     @property
     def scenario_path(self) -> str:
@@ -166,6 +169,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         return self._last_frame
 
     def close(self) -> None:
+        self._close_traffic()
         self._sim = None
         self._scenario_path = None
 
@@ -183,6 +187,27 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
     def score(self) -> dict[str, Any]:
         """The scene score record so far (final once the episode has terminated)."""
         return self._sim.score()
+
+    # -- background traffic (envs/traffic) -----------------------------------------------------
+    @property
+    def traffic_mode(self) -> str:
+        """The background-traffic mode in effect: "sumo", "native" or "none"."""
+        return resolve_traffic_mode(self.config.traffic, self._sim.scenario_traffic_mode)
+
+    def _configure_traffic(self) -> None:
+        mode = self.traffic_mode
+        if mode == "sumo":
+            if self._sumo is None:
+                self._sumo = SumoTraffic()
+            self._sim.set_traffic("sumo", self._sumo)
+        else:
+            self._close_traffic()
+            self._sim.set_traffic(mode)
+
+    def _close_traffic(self) -> None:
+        if self._sumo is not None:
+            self._sumo.close()
+            self._sumo = None
 
     def __getstate__(self) -> dict[str, Any]:
         # Pickled by config (+ seed on the next reset); the Rust world is rebuilt on load.

@@ -1,0 +1,56 @@
+"""A trained Stable-Baselines3 policy (`drivehierarchy baselines train ...`) as an `Agent`.
+
+`Sb3Agent("runs/ppo/model.zip")`, or `drivehierarchy r4 evaluate --agent sb3:runs/ppo/model.zip`.
+The archive carries the `WrapperConfig` the policy was trained with, and the agent applies the
+same observation and action mapping to the plain env, so the policy is scored by the same
+harness (and the same actuation bridge) as the expert and the VLMs.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from drivehierarchy._core import ConfigError
+
+
+class Sb3Agent:
+    def __init__(self, path: str | Path, deterministic: bool = True) -> None:
+        from drivehierarchy.baselines.wrappers import ActionCodec, ObsCodec
+
+        self.path = Path(path)
+        stat = self.path.stat() if self.path.is_file() else None
+        key = (str(self.path.resolve()), stat.st_mtime_ns if stat else 0, stat.st_size if stat else 0)
+        self.model, self.wrapper, self.meta = _load(*key)
+        self.obs_codec = ObsCodec(self.wrapper)
+        self.action_codec = ActionCodec(self.wrapper)
+        self.deterministic = deterministic
+        self.name = f"sb3:{self.path}"
+        # State policies never look at images, so runners can switch rendering off.
+        self.uses_images = self.wrapper.uses_images
+
+    def reset(self, env: gym.Env[Any, Any], info: dict[str, Any]) -> None:
+        mode = getattr(env.unwrapped, "config", None)
+        mode = getattr(mode, "action_mode", None)
+        if mode is not None and mode != self.wrapper.action:
+            raise ConfigError(
+                f"config `action_mode` = {mode!r}: the model {self.path} was trained with "
+                f"action mode {self.wrapper.action!r}"
+            )
+
+    def act(self, observation: dict[str, Any], info: dict[str, Any]) -> np.ndarray:
+        obs = self.obs_codec.encode(observation)
+        action, _ = self.model.predict(obs, deterministic=self.deterministic)
+        return self.action_codec.decode(action)
+
+
+@lru_cache(maxsize=8)
+def _load(path: str, mtime_ns: int, size: int) -> tuple[Any, Any, dict[str, Any]]:
+    """One load per model file (a runner builds an agent per scenario); prediction is stateless."""
+    from drivehierarchy.baselines.model_io import load_model
+
+    return load_model(Path(path))

@@ -1,0 +1,182 @@
+"""`drivehierarchy baselines ...`: collect expert demonstrations, train PPO / SAC / BC / DAgger.
+
+Every `train` writes OUT/model.zip (Stable-Baselines3 format, with the wrapper config inside), which
+`drivehierarchy r4 evaluate --agent sb3:OUT/model.zip` scores like any other agent.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from drivehierarchy._core import ConfigError
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    bl = sub.add_parser("baselines", help="RL and imitation baselines (needs the `rl` extra)")
+    cmds = bl.add_subparsers(dest="baselines_command", required=True)
+
+    def suite_args(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--suite", default="builtin", help="'builtin', a folder of scenarios, or one file")
+        p.add_argument(
+            "--held-out",
+            default="0.3",
+            help="held-out scenarios: a fraction of the files (stable hash split) or comma-separated "
+            "<category>/<name> ids; training uses the rest (default 0.3)",
+        )
+        p.add_argument("--seed", type=int, default=0)
+
+    col = cmds.add_parser("collect", help="record expert demonstrations as a Minari dataset")
+    col.add_argument("--agent", default="expert", help="demonstrator (only 'expert')")
+    col.add_argument("--episodes", type=int, required=True, help="episodes, scenarios taken in turn")
+    col.add_argument("--out", type=Path, required=True, help="dataset directory (Minari root)")
+    col.add_argument(
+        "--noise",
+        type=float,
+        default=1.0,
+        help="σ of DART-style action noise on every other episode (0 = none)",
+    )
+    suite_args(col)
+    col.set_defaults(func=_collect)
+
+    tr = cmds.add_parser("train", help="train a policy; writes OUT/model.zip")
+    tr.add_argument("algo", choices=["ppo", "sac", "bc", "dagger"])
+    tr.add_argument("--out", type=Path, required=True, help="output directory (resumable for ppo/sac)")
+    tr.add_argument("--data", type=Path, help="demonstrations from `collect` (bc, dagger)")
+    tr.add_argument("--steps", type=int, default=1_000_000, help="environment steps (ppo, sac)")
+    tr.add_argument("--envs", type=int, default=8, help="parallel envs (ppo, sac)")
+    tr.add_argument("--vec", default="auto", choices=["auto", "subproc", "dummy"], help="vectorisation")
+    tr.add_argument("--max-minutes", type=float, help="stop this run's learning after N minutes (ppo, sac)")
+    tr.add_argument("--checkpoint-every", type=int, default=50_000, help="steps between checkpoints")
+    tr.add_argument("--epochs", type=int, default=60, help="passes over the data (bc; dagger per round)")
+    tr.add_argument("--iterations", type=int, default=6, help="DAgger rounds")
+    tr.add_argument("--obs", default="state", choices=["state", "bev", "state+bev"])
+    tr.add_argument("--bev-size", type=int, default=128, help="side of the BEV image (obs bev, state+bev)")
+    tr.add_argument("--action", default="decision", choices=["decision", "raw"])
+    tr.add_argument("--reward", default="shaped", choices=["shaped", "score"], help="training reward")
+    tr.add_argument("--max-speed", type=float, default=16.0, help="target speed at a[1] = +1 (m/s)")
+    tr.add_argument(
+        "--threads", type=int, default=1, help="torch threads (small MLPs: 1 is fastest on a shared box)"
+    )
+    tr.add_argument(
+        "--hp", action="append", default=[], metavar="KEY=JSON", help="SB3 hyperparameter override"
+    )
+    suite_args(tr)
+    tr.set_defaults(func=_train)
+
+    cv = cmds.add_parser("curve", help="redraw OUT/learning_curve.png from the monitor logs")
+    cv.add_argument("out", type=Path)
+    cv.set_defaults(func=_curve)
+
+
+def split_from_args(args: argparse.Namespace) -> tuple[list[Path], list[Path]]:
+    from drivehierarchy.baselines.wrappers import split_suite
+    from drivehierarchy.benchmark.r4.runner import suite_scenarios
+
+    scenarios = suite_scenarios(args.suite)
+    held: Any
+    try:
+        held = float(args.held_out)
+    except ValueError:
+        held = [s.strip() for s in args.held_out.split(",") if s.strip()]
+    return split_suite(scenarios, held)
+
+
+def _log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def _collect(args: argparse.Namespace) -> int:
+    from drivehierarchy.baselines import imitation
+
+    train, held = split_from_args(args)
+    imitation.collect(
+        train, args.episodes, args.out, agent=args.agent, noise=args.noise, seed=args.seed, log=_log
+    )
+    (args.out / "split.json").write_text(
+        json.dumps({"train": [str(p) for p in train], "held_out": [str(p) for p in held]}, indent=2) + "\n",
+        encoding="utf-8",
+    )
+    return 0
+
+
+def _hyperparams(items: list[str]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise ConfigError(f"config `hp` = {item!r}: expected KEY=VALUE")
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            raise ConfigError(f"config `hp.{key}` = {value!r}: not a JSON value") from None
+    return out
+
+
+def _train(args: argparse.Namespace) -> int:
+    import torch
+
+    from drivehierarchy.baselines.wrappers import WrapperConfig
+
+    torch.set_num_threads(max(1, args.threads))
+    train, held = split_from_args(args)
+    wrapper = WrapperConfig(
+        action=args.action,
+        max_speed_mps=args.max_speed,
+        obs=args.obs,
+        bev_size=args.bev_size,
+        reward=args.reward,
+    )
+    if args.algo in ("ppo", "sac"):
+        from drivehierarchy.baselines.rl import train_rl
+
+        train_rl(
+            args.algo,
+            train,
+            held,
+            args.out,
+            steps=args.steps,
+            n_envs=args.envs,
+            wrapper=wrapper,
+            seed=args.seed,
+            vec=args.vec,
+            checkpoint_every=args.checkpoint_every,
+            hyperparams=_hyperparams(args.hp),
+            max_minutes=args.max_minutes,
+            log=_log,
+        )
+        return 0
+    from drivehierarchy.baselines import imitation
+    from drivehierarchy.baselines.rl import write_split
+
+    if args.data is None:
+        raise ConfigError(f"config `data` = None: `train {args.algo}` needs --data DIR from `collect`")
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_split(args.out, train, held, wrapper, args.algo)
+    if args.algo == "bc":
+        imitation.train_bc(
+            args.data, train, args.out, epochs=args.epochs, wrapper=wrapper, seed=args.seed, log=_log
+        )
+    else:
+        imitation.train_dagger(
+            args.data,
+            train,
+            args.out,
+            iterations=args.iterations,
+            epochs=max(1, args.epochs // 2),
+            wrapper=wrapper,
+            seed=args.seed,
+            log=_log,
+        )
+    return 0
+
+
+def _curve(args: argparse.Namespace) -> int:
+    from drivehierarchy.baselines.rl import learning_curve
+
+    png = learning_curve(args.out / "monitor", args.out / "learning_curve.png", title=args.out.name)
+    print(png)
+    return 0

@@ -1,0 +1,423 @@
+"""RL-ready views of `DriveHierarchy-R4`: normalised actions, a scaled flat state, a small BEV image,
+an optional shaped training reward, and a scenario sampler over a suite.
+
+Every transform lives in a small codec (`ActionCodec`, `ObsCodec`) described by one JSON-able
+`WrapperConfig`, so a trained policy is driven through exactly the same mapping at evaluation
+time (`drivehierarchy.agents.sb3`, which reads the config stored inside `model.zip`).
+
+The shaped reward is a training signal only: the env's own reward, `score()` record and
+`info` are never changed (the wrappers sit outside the env), so the benchmark score of an
+episode is the protocol's whatever the training reward was.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar, Literal
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from drivehierarchy._core import ConfigError
+from drivehierarchy.envs.config import BevConfig, R4Config
+from drivehierarchy.envs.r4 import STATE_FIELDS, DriveHierarchyR4Env
+
+ObsKind = Literal["state", "bev", "state+bev"]
+ActionKind = Literal["decision", "raw"]
+
+# The protocol's BEV covers 800 px / 8 px/m = 100 m; the small BEV keeps that field of view.
+PROTOCOL_BEV_SPAN_M = 100.0
+STATE_CLIP = 10.0
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """Weights of the shaped training reward (per decision step).
+
+    r = score·r_env + progress·Δ(best route progress)/10 m − comfort·(Δsteer)²
+        − terminal penalty by termination reason (collision, off-road, blocked; 0 at the goal).
+    """
+
+    score: float = 10.0
+    progress: float = 1.0
+    comfort: float = 0.1
+    collision: float = 10.0
+    offroad: float = 10.0
+    blocked: float = 5.0
+    timeout: float = 2.0
+
+
+@dataclass(frozen=True)
+class WrapperConfig:
+    """How the env is presented to a learner (saved with every trained model)."""
+
+    action: ActionKind = "decision"
+    # Normalised a[1] ∈ [−1, 1] maps linearly to target speed ∈ [0, max_speed_mps] (0 → half of it,
+    # so an untrained policy starts by driving rather than standing still).
+    max_speed_mps: float = 16.0
+    obs: ObsKind = "state"
+    bev_size: int = 128
+    reward: Literal["score", "shaped"] = "shaped"
+    shaping: RewardConfig = field(default_factory=RewardConfig)
+
+    def __post_init__(self) -> None:
+        if self.action not in ("decision", "raw"):
+            raise ConfigError(f"config `action` = {self.action!r}: expected 'decision' or 'raw'")
+        if self.obs not in ("state", "bev", "state+bev"):
+            raise ConfigError(f"config `obs` = {self.obs!r}: expected 'state', 'bev' or 'state+bev'")
+        if self.reward not in ("score", "shaped"):
+            raise ConfigError(f"config `reward` = {self.reward!r}: expected 'score' or 'shaped'")
+        if not 0.0 < float(self.max_speed_mps) <= 30.0:
+            raise ConfigError(f"config `max_speed_mps` = {self.max_speed_mps!r}: expected in (0, 30]")
+        if not 16 <= int(self.bev_size) <= 800:
+            raise ConfigError(f"config `bev_size` = {self.bev_size!r}: expected 16..800 pixels")
+
+    @property
+    def uses_images(self) -> bool:
+        return self.obs != "state"
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), sort_keys=True)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> WrapperConfig:
+        data = dict(data)
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ConfigError(f"config `{unknown[0]}` = {data[unknown[0]]!r}: unknown wrapper setting")
+        shaping = data.pop("shaping", None)
+        if isinstance(shaping, dict):
+            rknown = {f.name for f in dataclasses.fields(RewardConfig)}
+            bad = sorted(set(shaping) - rknown)
+            if bad:
+                raise ConfigError(f"config `shaping.{bad[0]}` = {shaping[bad[0]]!r}: unknown reward weight")
+            data["shaping"] = RewardConfig(**shaping)
+        return cls(**data)
+
+    def env_config(self, base: R4Config | None = None) -> R4Config:
+        """The env settings this view needs: no front camera or prompt; a small BEV if used."""
+        base = base or R4Config()
+        bev = None
+        if self.uses_images:
+            bev = BevConfig(size_px=self.bev_size, px_per_m=self.bev_size / PROTOCOL_BEV_SPAN_M)
+        return base.replace(action_mode=self.action, front=None, bev=bev, prompt=False)
+
+
+# -- actions ------------------------------------------------------------------------------------
+class ActionCodec:
+    """Normalised [−1, 1]² ↔ the env's action.
+
+    decision: a = [steer, speed] → [steer, (speed + 1)/2 · max_speed] (the protocol's bridge then
+    turns it into pedals); raw: a = [steer, accel] → [throttle = max(accel, 0),
+    brake = max(−accel, 0), steer].
+    """
+
+    space = spaces.Box(-1.0, 1.0, (2,), np.float32)
+
+    def __init__(self, config: WrapperConfig) -> None:
+        self.kind = config.action
+        self.max_speed = float(config.max_speed_mps)
+
+    def decode(self, a: np.ndarray) -> np.ndarray:
+        a = np.clip(np.asarray(a, dtype=np.float32).reshape(2), -1.0, 1.0)
+        if self.kind == "decision":
+            return np.array([a[0], (a[1] + 1.0) * 0.5 * self.max_speed], np.float32)
+        return np.array([max(a[1], 0.0), max(-a[1], 0.0), a[0]], np.float32)
+
+    def encode(self, env_action: np.ndarray) -> np.ndarray:
+        """The normalised action that decodes to (the clipped) `env_action` (for imitation labels)."""
+        e = np.asarray(env_action, dtype=np.float32)
+        if self.kind == "decision":
+            out = np.array([e[0], 2.0 * e[1] / self.max_speed - 1.0], np.float32)
+        else:
+            out = np.array([e[2], e[0] - e[1]], np.float32)
+        return np.clip(out, -1.0, 1.0)
+
+
+# -- observations ---------------------------------------------------------------------------------
+def _field_scale(name: str) -> float:
+    if name in ("speed_mps",) or name.endswith("_speed_mps"):
+        return 10.0
+    if name in ("progress_m", "route_length_m", "distance_to_go_m"):
+        return 100.0
+    if name == "time_s":
+        return 60.0
+    if name == "lateral_offset_m":
+        return 2.0
+    if name.endswith("heading_rad"):
+        return float(np.pi)
+    if name.startswith(("route_p", "actor")) and name.endswith("_m"):
+        return 20.0
+    if name == "light_ahead_distance_m":
+        return 50.0
+    return 1.0  # flags, controls, heading error (rad)
+
+
+_SCALE = np.array([_field_scale(n) for n in STATE_FIELDS], np.float32)
+_COMMAND = STATE_FIELDS.index("command")
+N_COMMANDS = 6
+
+
+class ObsCodec:
+    """The env's observation dict → what the policy sees.
+
+    state: the 60 state fields each divided by a fixed scale (metres by 20–100, speeds by 10, …),
+    the navigation command one-hot (6) instead of its code, clipped to ±10 — fixed, so nothing
+    has to be saved beside the model. bev: the small BEV image (H×W×3 uint8).
+    """
+
+    def __init__(self, config: WrapperConfig) -> None:
+        self.kind = config.obs
+        self.bev_size = int(config.bev_size)
+        self.state_dim = len(STATE_FIELDS) - 1 + N_COMMANDS
+        state_space = spaces.Box(-STATE_CLIP, STATE_CLIP, (self.state_dim,), np.float32)
+        bev_space = spaces.Box(0, 255, (self.bev_size, self.bev_size, 3), np.uint8)
+        if self.kind == "state":
+            self.space: spaces.Space[Any] = state_space
+        elif self.kind == "bev":
+            self.space = bev_space
+        else:
+            self.space = spaces.Dict({"bev": bev_space, "state": state_space})
+
+    def state(self, raw: np.ndarray) -> np.ndarray:
+        s = np.asarray(raw, dtype=np.float32) / _SCALE
+        onehot = np.zeros(N_COMMANDS, np.float32)
+        cmd = round(float(raw[_COMMAND]))
+        if 1 <= cmd <= N_COMMANDS:
+            onehot[cmd - 1] = 1.0
+        out = np.concatenate([np.delete(s, _COMMAND), onehot])
+        return np.clip(out, -STATE_CLIP, STATE_CLIP).astype(np.float32)
+
+    def bev(self, obs: dict[str, Any]) -> np.ndarray:
+        img = obs.get("bev")
+        if img is None:
+            raise ConfigError("config `obs` = 'bev': the env gives no BEV image (bev=None)")
+        img = np.asarray(img, dtype=np.uint8)
+        if img.shape[:2] != (self.bev_size, self.bev_size):
+            # An env rendering the protocol's 800×800 BEV (same 100 m span): area-downsample.
+            from PIL import Image
+
+            img = np.asarray(
+                Image.fromarray(img).resize((self.bev_size, self.bev_size), Image.Resampling.BOX)
+            )
+        return img
+
+    def encode(self, obs: dict[str, Any]) -> Any:
+        if self.kind == "state":
+            return self.state(obs["state"])
+        if self.kind == "bev":
+            return self.bev(obs)
+        return {"bev": self.bev(obs), "state": self.state(obs["state"])}
+
+
+# -- the scenario sampler -----------------------------------------------------------------------
+def split_suite(
+    scenarios: Sequence[Path], held_out: float | Sequence[str] = 0.3
+) -> tuple[list[Path], list[Path]]:
+    """Splits scenario files into (train, held-out), by file.
+
+    `held_out` is a fraction (files ranked by a hash of `<category>/<file name>`, so the split is
+    stable and does not depend on the order or the machine) or a list of `<category>/<stem>` ids.
+    """
+    paths = [Path(p) for p in scenarios]
+    ids = [f"{p.parent.name}/{p.stem}" for p in paths]
+    if isinstance(held_out, (int, float)):
+        if not 0.0 <= float(held_out) < 1.0:
+            raise ConfigError(f"config `held_out` = {held_out!r}: expected a fraction in [0, 1)")
+        n_out = round(len(paths) * float(held_out))
+        ranked = sorted(range(len(paths)), key=lambda i: hashlib.sha256(ids[i].encode()).hexdigest())
+        out_set = {ids[i] for i in ranked[:n_out]}
+    else:
+        out_set = set(held_out)
+        unknown = sorted(out_set - set(ids))
+        if unknown:
+            raise ConfigError(f"config `held_out` = {unknown[0]!r}: not a scenario of the suite")
+    train = [p for p, i in zip(paths, ids, strict=True) if i not in out_set]
+    test = [p for p, i in zip(paths, ids, strict=True) if i in out_set]
+    if not train:
+        raise ConfigError(f"config `held_out` = {held_out!r}: leaves no training scenario")
+    return train, test
+
+
+class SuiteEnv(gym.Env[dict[str, Any], np.ndarray]):
+    """One `DriveHierarchy-R4` over many scenario files: each reset drives one of them.
+
+    The scenario is drawn from the env's seeded `np_random` (uniformly, or in turn with
+    `order="cycle"`), or forced with `reset(options={"scenario": path})`. One Rust world is kept per
+    scenario, so switching costs nothing after the first load. `expert_action()`, `score()`, `sim`
+    and `scenario_path` refer to the current scenario, so the expert and the runner work unchanged.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
+
+    def __init__(
+        self,
+        scenarios: Sequence[str | Path],
+        config: R4Config | None = None,
+        order: Literal["random", "cycle"] = "random",
+    ) -> None:
+        if not scenarios:
+            raise ConfigError("config `scenarios` = []: the suite has no scenario files")
+        if order not in ("random", "cycle"):
+            raise ConfigError(f"config `order` = {order!r}: expected 'random' or 'cycle'")
+        self.scenarios = [str(p) for p in scenarios]
+        self.config = config or R4Config()
+        self.order = order
+        self._envs: dict[str, DriveHierarchyR4Env] = {}
+        self._cycle = 0
+        self.current = self._env(self.scenarios[0])
+        self.observation_space = self.current.observation_space
+        self.action_space = self.current.action_space
+
+    def _env(self, path: str) -> DriveHierarchyR4Env:
+        env = self._envs.get(path)
+        if env is None:
+            env = DriveHierarchyR4Env(scenario=path, config=self.config)
+            self._envs[path] = env
+        return env
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, Any], dict[str, Any]]:
+        super().reset(seed=seed)
+        options = dict(options or {})
+        path = options.pop("scenario", None)
+        if path is None:
+            if self.order == "cycle":
+                path = self.scenarios[self._cycle % len(self.scenarios)]
+                self._cycle += 1
+            else:
+                path = self.scenarios[int(self.np_random.integers(len(self.scenarios)))]
+        self.current = self._env(str(path))
+        sub_seed = int(self.np_random.integers(0, 2**31 - 1))
+        obs, info = self.current.reset(seed=sub_seed, options=options)
+        info = dict(info)
+        info["scenario"] = str(path)
+        return obs, info
+
+    def step(self, action: Any) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
+        return self.current.step(action)
+
+    # privileged / runner access to the current scenario
+    def expert_action(self) -> np.ndarray:
+        return self.current.expert_action()
+
+    def score(self) -> dict[str, Any]:
+        return self.current.score()
+
+    @property
+    def sim(self) -> Any:
+        return self.current.sim
+
+    @property
+    def scenario_path(self) -> str:
+        return self.current.scenario_path
+
+    def close(self) -> None:
+        for env in self._envs.values():
+            env.close()
+        self._envs.clear()
+
+
+# -- wrappers -----------------------------------------------------------------------------------
+class NormalizedActions(gym.ActionWrapper[Any, np.ndarray, np.ndarray]):
+    """Actions in [−1, 1]² (see `ActionCodec`)."""
+
+    def __init__(self, env: gym.Env[Any, Any], config: WrapperConfig) -> None:
+        super().__init__(env)
+        self.codec = ActionCodec(config)
+        self.action_space = ActionCodec.space
+
+    def action(self, action: np.ndarray) -> np.ndarray:
+        return self.codec.decode(action)
+
+
+class PolicyObservation(gym.ObservationWrapper[Any, Any, dict[str, Any]]):
+    """The flat scaled state, the small BEV, or both (see `ObsCodec`)."""
+
+    def __init__(self, env: gym.Env[Any, Any], config: WrapperConfig) -> None:
+        super().__init__(env)
+        self.codec = ObsCodec(config)
+        self.observation_space = self.codec.space
+
+    def observation(self, observation: dict[str, Any]) -> Any:
+        return self.codec.encode(observation)
+
+
+class ShapedReward(gym.Wrapper[Any, Any, Any, Any]):
+    """Training reward (see `RewardConfig`). The env's own per-step reward is kept in
+    `info["score_reward"]`; the env's `score()` record is untouched."""
+
+    def __init__(self, env: gym.Env[Any, Any], config: RewardConfig) -> None:
+        super().__init__(env)
+        self.weights = config
+        self._best = 0.0
+        self._steer = 0.0
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        obs, info = self.env.reset(**kwargs)
+        self._best = float(info.get("best_progress_m", 0.0))
+        self._steer = float(info.get("control", {}).get("steer", 0.0))
+        return obs, info
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        w = self.weights
+        best = float(info.get("best_progress_m", self._best))
+        steer = float(info.get("control", {}).get("steer", self._steer))
+        shaped = (
+            w.score * reward
+            + w.progress * (best - self._best) / 10.0
+            - w.comfort * (steer - self._steer) ** 2
+        )
+        self._best, self._steer = best, steer
+        if terminated:
+            shaped -= terminal_penalty(w, info.get("termination_reason"))
+        info = dict(info)
+        info["score_reward"] = reward
+        return obs, float(shaped), terminated, truncated, info
+
+
+def terminal_penalty(w: RewardConfig, reason: str | None) -> float:
+    if reason is None or reason == "destination_reached":
+        return 0.0
+    if reason.startswith("collision"):
+        return w.collision
+    if reason == "offroad_timeout" or reason == "route_deviation":
+        return w.offroad
+    if reason == "blocked_timeout":
+        return w.blocked
+    return w.timeout
+
+
+def make_env(
+    scenarios: Sequence[str | Path],
+    config: WrapperConfig | None = None,
+    *,
+    base: R4Config | None = None,
+    order: Literal["random", "cycle"] = "random",
+    monitor: bool = True,
+) -> gym.Env[Any, Any]:
+    """A learner's env over `scenarios`: sampler → (shaped reward) → normalised actions → policy
+    observation (→ SB3 `Monitor`, which records episode returns and lengths)."""
+    config = config or WrapperConfig()
+    env: gym.Env[Any, Any] = SuiteEnv(scenarios, config.env_config(base), order=order)
+    if config.reward == "shaped":
+        env = ShapedReward(env, config.shaping)
+    env = NormalizedActions(env, config)
+    env = PolicyObservation(env, config)
+    if monitor:
+        from stable_baselines3.common.monitor import Monitor
+
+        env = Monitor(env, info_keywords=("termination_reason",))
+    return env

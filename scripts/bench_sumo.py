@@ -1,0 +1,200 @@
+"""Speed of the live background traffic, side by side with libsumo alone.
+
+    python scripts/bench_sumo.py [--scenario PATH] [--ticks N] [--seed S]
+
+On one core (the process is pinned to one CPU), no images, on the same net and vehicles:
+
+1. co-simulation: `DriveHierarchy-R4` in SUMO mode driven by the expert; only `env.step` is
+   timed (the expert's own time is not); the ego's SUMO pose of every tick is recorded;
+2. libsumo alone: the same route file and seed, the ego replayed from (1) with `moveToXY`;
+   `simulationStep()` alone is timed (SUMO's own step time), and separately the reading of the
+   same vehicle subscriptions the co-simulation uses;
+3. the world alone: the same scenario with `traffic="none"` and the same expert (what a tick
+   costs without any traffic);
+4. the native reactive mode on the same scenario (no SUMO).
+
+Printed: ticks/s of each, and the sync overhead = co-sim tick − SUMO step − world-alone tick,
+as a share of SUMO's step time (targets: ≥ 2,000 co-simulated ticks/s with ~50 vehicles,
+overhead ≤ 25 %, native ≥ 10,000 ticks/s).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from drivehierarchy.envs.r4 import DriveHierarchyR4Env
+from drivehierarchy.scenarios import builtin_root
+
+DEFAULT = builtin_root() / "bench" / "town01_sumo_traffic.toml"
+
+
+def run_env(scenario: Path, ticks: int, seed: int, traffic: str) -> dict[str, Any]:
+    env = DriveHierarchyR4Env(scenario=scenario, front=None, bev=None, prompt=False, traffic=traffic)
+    per = env.config.decision_interval_ticks
+    spent, done, vehicles, episodes = 0.0, 0, [], 0
+    ego_track: list[tuple[float, float, float]] = []
+    try:
+        while done < ticks:
+            env.reset(seed=seed + episodes)
+            episodes += 1
+            while done < ticks:
+                action = env.expert_action()
+                t0 = time.perf_counter()
+                term = env.step(action)[2]
+                spent += time.perf_counter() - t0
+                done += per
+                rows = env.sim.actors_array()
+                vehicles.append(int((rows[:, 7] == 1.0).sum()))
+                if episodes == 1:
+                    e = env.sim.ego_array()
+                    ego_track.append((float(e[0]), float(e[1]), float(e[2])))
+                if term:
+                    break
+    finally:
+        env.close()
+    return {
+        "tick_us": spent / done * 1e6,
+        "ticks": done,
+        "vehicles": float(np.mean(vehicles)) if vehicles else 0.0,
+        "episodes": episodes,
+        "ego_track": ego_track,
+    }
+
+
+def run_sumo_alone(scenario: Path, seed: int, ego_track: list[tuple[float, float, float]]) -> dict[str, Any]:
+    """libsumo on the co-simulation's route file, ego replayed per decision (held for its ticks)."""
+    import libsumo as ls
+    from sumo import SUMO_HOME
+
+    env = DriveHierarchyR4Env(scenario=scenario, front=None, bev=None, prompt=False, traffic="none")
+    world_seed = _world_seed(seed)
+    routes_xml = env.sim.traffic_routes(world_seed)
+    env.reset(seed=seed)
+    length = float(env.sim.ego_array()[4])
+    warmup = _warmup(Path(env.scenario_path))
+    net = _net_path(scenario)
+    env.close()
+    with tempfile.TemporaryDirectory() as tmp:
+        routes = Path(tmp) / "r.rou.xml"
+        routes.write_text(routes_xml, encoding="utf-8")
+        ls.start(
+            [str(Path(SUMO_HOME) / "bin" / "sumo"), "-n", net, "-r", str(routes), "--step-length", "0.05",
+             "--seed", str(world_seed % 2**31), "--collision.action", "none", "--no-step-log", "true",
+             "--no-warnings", "true"]
+        )  # fmt: skip
+        try:
+            ls.vehicle.add("dh_ego", "dh_ego_route", typeID="dh_ego", depart="now")
+            x0, y0, yaw0 = ego_track[0]
+            for _ in range(warmup):
+                _move(ls, x0, y0, yaw0, length)
+                ls.simulationStep()
+            tc = ls.constants
+            ls.simulation.subscribe([tc.VAR_DEPARTED_VEHICLES_IDS])
+            variables = (tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_SPEED, tc.VAR_SIGNALS)
+            for vid in ls.vehicle.getIDList():
+                if not vid.startswith("dh_"):
+                    ls.vehicle.subscribe(vid, variables)
+            spent, read, steps, counts = 0.0, 0.0, 0, []
+            for x, y, yaw in ego_track:
+                for _ in range(5):
+                    _move(ls, x, y, yaw, length)
+                    t0 = time.perf_counter()
+                    ls.simulationStep()
+                    t1 = time.perf_counter()
+                    for vid in ls.simulation.getSubscriptionResults()[tc.VAR_DEPARTED_VEHICLES_IDS]:
+                        ls.vehicle.subscribe(vid, variables)
+                    ls.vehicle.getAllSubscriptionResults()
+                    read += time.perf_counter() - t1
+                    spent += t1 - t0
+                    steps += 1
+                counts.append(ls.vehicle.getIDCount() - 1)
+        finally:
+            ls.close()
+    return {
+        "tick_us": spent / steps * 1e6,
+        "read_us": read / steps * 1e6,
+        "ticks": steps,
+        "vehicles": float(np.mean(counts)),
+    }
+
+
+def _move(ls: Any, x: float, y: float, yaw: float, length: float) -> None:
+    fx, fy = x + 0.5 * length * math.cos(yaw), y + 0.5 * length * math.sin(yaw)
+    ls.vehicle.moveToXY("dh_ego", "", -1, fx, fy, 90.0 - math.degrees(yaw), 2)
+
+
+def _world_seed(seed: int) -> int:
+    """The world seed the env derives from `reset(seed=...)` (its np_random, Gymnasium semantics)."""
+    from gymnasium.utils import seeding
+
+    rng, _ = seeding.np_random(seed)
+    return int(rng.integers(0, 2**63 - 1))
+
+
+def _net_path(scenario: Path) -> str:
+    import json
+
+    from drivehierarchy import _core
+    from drivehierarchy.scenarios import sumo_home
+
+    return str(json.loads(_core.validate_scenario(str(scenario), sumo_home()))["map"])
+
+
+def _warmup(scenario: Path) -> int:
+    import tomllib
+
+    data = tomllib.loads(scenario.read_text(encoding="utf-8"))
+    return round(float(data.get("traffic", {}).get("warmup_s", 0.0)) / 0.05)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--scenario", type=Path, default=DEFAULT)
+    ap.add_argument("--ticks", type=int, default=4000)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--skip-native", action="store_true")
+    args = ap.parse_args()
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+    cosim = run_env(args.scenario, args.ticks, args.seed, "sumo")
+    alone = run_sumo_alone(args.scenario, args.seed, cosim["ego_track"])
+    world = run_env(args.scenario, args.ticks, args.seed, "none")
+    native = None if args.skip_native else run_env(args.scenario, args.ticks, args.seed, "native")
+    overhead = cosim["tick_us"] - alone["tick_us"] - world["tick_us"]
+    rows = [
+        ("libsumo alone (simulationStep)", alone),
+        ("co-simulation (env.step, SUMO mode)", cosim),
+        ("world alone (traffic none)", world),
+    ]
+    if native is not None:
+        rows.append(("native reactive mode", native))
+    print(f"scenario {args.scenario.name}, one core, no images, seed {args.seed}")
+    print(f"{'':38s} {'µs/tick':>9s} {'ticks/s':>9s} {'vehicles':>9s}")
+    for name, r in rows:
+        print(f"{name:38s} {r['tick_us']:9.1f} {1e6 / r['tick_us']:9.0f} {r['vehicles']:9.1f}")
+    print(
+        f"co-sim / SUMO alone: {cosim['tick_us'] / alone['tick_us']:.2f}×; "
+        f"sync overhead (co-sim − SUMO − world) {overhead:.1f} µs = "
+        f"{100 * overhead / alone['tick_us']:.1f} % of SUMO's step (target ≤ 25 %)"
+    )
+    print(
+        f"of which reading the vehicles' subscription results (libsumo → Python, what any libsumo "
+        f"client pays): {alone['read_us']:.1f} µs = {100 * alone['read_us'] / alone['tick_us']:.1f} % "
+        f"of SUMO's step; the rest of the overhead: {overhead - alone['read_us']:.1f} µs = "
+        f"{100 * (overhead - alone['read_us']) / alone['tick_us']:.1f} %"
+    )
+    print(f"co-simulated ticks/s {1e6 / cosim['tick_us']:.0f} (target ≥ 2,000 with ~50 vehicles)")
+    if native is not None:
+        print(f"native ticks/s {1e6 / native['tick_us']:.0f} (target ≥ 10,000 with 50 vehicles)")
+
+
+if __name__ == "__main__":
+    main()

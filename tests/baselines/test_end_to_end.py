@@ -1,0 +1,215 @@
+"""CI-sized end to end (≈ 1–2 min on 2 cores): collect expert demonstrations (Minari), train BC and
+PPO through the CLI, save, resume after a kill, and score the models through `r4 evaluate`
+exactly like any other agent. The full-size targets are measured by scripts/train_baselines.py
+(docs/baselines.md)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+pytest.importorskip("minari")
+
+from drivehierarchy.agents.sb3 import Sb3Agent
+from drivehierarchy.baselines.imitation import DATASET_ID, load_demos
+from drivehierarchy.baselines.model_io import read_meta
+from drivehierarchy.baselines.wrappers import make_env
+from drivehierarchy.cli import main
+from drivehierarchy.scenarios import builtin_root
+
+# Score-record fields measuring wall-clock time (names before/after protocol v2).
+WALL_CLOCK_KEYS = ("wall_duration", "duration_system")
+INTERSECTION = builtin_root() / "r4" / "04_intersection" / "town01_straight_cross_traffic.toml"
+T_JUNCTION = builtin_root() / "r4" / "05_t_intersection" / "town01_left_turn_t.toml"
+
+
+def cli(*args: str) -> None:
+    assert main([str(a) for a in args]) == 0
+
+
+def scores(out: Path) -> dict[str, float]:
+    lines = (out / "results.jsonl").read_text().splitlines()
+    return {json.loads(x)["key"]: json.loads(x)["score"]["score_composed"] for x in lines}
+
+
+@pytest.fixture(scope="module")
+def demos(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    data = tmp_path_factory.mktemp("demos")
+    # 14 episodes = each of the 7 training scenarios twice (once clean, once with DART noise).
+    cli("baselines", "collect", "--agent", "expert", "--suite", "builtin", "--episodes", "14", "--out", data)
+    return data
+
+
+def test_collect_writes_a_minari_dataset_with_expert_labels(demos: Path) -> None:
+    import minari
+
+    assert (demos / DATASET_ID / "data" / "main_data.hdf5").is_file()
+    os.environ["MINARI_DATASETS_PATH"] = str(demos)
+    ds = minari.load_dataset(DATASET_ID)
+    assert ds.total_episodes == 14
+    ep = next(iter(ds.iterate_episodes()))
+    assert ep.observations["state"].shape[0] == len(ep.actions) + 1
+    states, labels = load_demos(demos)
+    assert len(states) == len(labels) == ds.total_steps
+    assert labels[:, 1].max() > 5.0  # the expert drives
+    split = json.loads((demos / "split.json").read_text())
+    assert len(split["train"]) == 7 and len(split["held_out"]) == 3
+    meta = json.loads((demos / "collect.json").read_text())
+    assert meta["mean_score"] > 50.0
+
+
+def test_bc_beats_zero_speed_through_r4_evaluate(demos: Path, tmp_path: Path) -> None:
+    out = tmp_path / "bc"
+    cli("baselines", "train", "bc", "--data", demos, "--suite", "builtin", "--epochs", "40", "--out", out)
+    model = out / "model.zip"
+    meta = read_meta(model)
+    assert meta["algo"] == "ppo" and meta["trained_by"] == "bc" and meta["wrapper"]["obs"] == "state"
+    train = {
+        f"{Path(p).parent.name}__{Path(p).stem}"
+        for p in json.loads((out / "split.json").read_text())["train"]
+    }
+    cli("r4", "evaluate", "--agent", f"sb3:{model}", "--suite", "builtin", "--out", tmp_path / "ev_bc")
+    cli("r4", "evaluate", "--agent", "zero", "--suite", "builtin", "--out", tmp_path / "ev_zero")
+    bc, zero = scores(tmp_path / "ev_bc"), scores(tmp_path / "ev_zero")
+    bc_train = float(np.mean([bc[k] for k in train]))
+    zero_train = float(np.mean([zero[k] for k in train]))
+    assert bc_train > zero_train + 20.0, (bc, zero)
+    manifest = json.loads((tmp_path / "ev_bc" / "manifest.json").read_text())
+    assert manifest["agent"] == f"sb3:{model}"
+
+
+def test_dagger_aggregates_expert_labels_of_its_own_rollouts(demos: Path, tmp_path: Path) -> None:
+    out = tmp_path / "dagger"
+    cli(
+        *("baselines", "train", "dagger", "--data", demos, "--suite", "builtin"),
+        *("--iterations", "2", "--epochs", "8", "--out", out),
+    )
+    log = [json.loads(x) for x in (out / "train_log.jsonl").read_text().splitlines()]
+    rounds = [r for r in log if r["phase"] == "dagger"]
+    assert [r["iteration"] for r in rounds] == [1, 2]
+    assert [r["beta"] for r in rounds] == [0.5, 0.25]
+    assert all(r["new_samples"] > 100 for r in rounds)
+    states, _ = load_demos(demos)
+    assert log[-1]["samples"] == len(states) + sum(r["new_samples"] for r in rounds)
+    assert read_meta(out / "model.zip")["trained_by"] == "dagger"
+    model = f"sb3:{out / 'model.zip'}"
+    cli("r4", "run", "--agent", model, "--scenario", INTERSECTION, "--out", tmp_path / "ev")
+
+
+def test_the_agent_drives_exactly_like_the_training_wrappers(demos: Path, tmp_path: Path) -> None:
+    """`sb3:` through the plain env == the model on the wrapped env it was trained on."""
+    out = tmp_path / "bc"
+    cli("baselines", "train", "bc", "--data", demos, "--epochs", "5", "--out", out)
+    agent = Sb3Agent(out / "model.zip")
+    assert agent.uses_images is False
+    env = make_env([INTERSECTION], agent.wrapper, monitor=False)
+    obs, _ = env.reset(seed=0)
+    while True:
+        a, _ = agent.model.predict(obs, deterministic=True)
+        obs, _, term, trunc, _ = env.step(a)
+        if term or trunc:
+            break
+    wrapped = env.unwrapped.score()
+    cli(
+        "r4",
+        "run",
+        "--agent",
+        f"sb3:{out / 'model.zip'}",
+        "--scenario",
+        INTERSECTION,
+        "--out",
+        tmp_path / "ev",
+    )
+    via_runner = json.loads(next((tmp_path / "ev" / "scenes").glob("*/scene_score.json")).read_text())
+    for record in (via_runner, wrapped):
+        for key in WALL_CLOCK_KEYS:  # wall-clock time, the one non-simulated field
+            record["meta"].pop(key, None)
+    assert via_runner == wrapped
+
+
+def test_ppo_learns_saves_resumes_after_a_kill_and_evaluates(tmp_path: Path) -> None:
+    """Reduced version of the PPO target: 16k decisions on the T-junction left turn (where the
+    constant-speed policy drives straight on and scores 21) must beat it by 30 points."""
+    out = tmp_path / "ppo"
+    args = [
+        sys.executable, "-m", "drivehierarchy.cli", "baselines", "train", "ppo", "--suite", str(T_JUNCTION),
+        "--held-out", "0", "--envs", "8", "--vec", "dummy", "--checkpoint-every", "2048",
+        "--hp", "n_steps=256", "--out", str(out),
+    ]  # fmt: skip
+    proc = subprocess.Popen([*args, "--steps", "1000000"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 120
+    while not list((out / "checkpoints").glob("rl_model_*_steps.zip")):
+        assert proc.poll() is None, proc.stderr.read().decode() if proc.stderr else ""
+        assert time.monotonic() < deadline, "no checkpoint within 120 s"
+        time.sleep(0.5)
+    time.sleep(1.0)  # let the checkpoint file be complete
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert not (out / "model.zip").exists()
+    resumed = [*args, "--steps", "16384"]
+    done = subprocess.run(resumed, capture_output=True, text=True, timeout=300, check=False)
+    assert done.returncode == 0, done.stderr
+    assert "resuming from" in done.stderr
+    meta = read_meta(out / "model.zip")
+    assert meta["algo"] == "ppo" and meta["steps"] >= 16384
+    assert (out / "learning_curve.png").stat().st_size > 0
+    assert list((out / "tb").rglob("events.out.tfevents.*"))
+    assert list((out / "monitor").glob("*.monitor.csv"))
+    model = f"sb3:{out / 'model.zip'}"
+    cli("r4", "evaluate", "--agent", model, "--suite", T_JUNCTION, "--out", tmp_path / "ev")
+    cli("r4", "evaluate", "--agent", "constant8", "--suite", T_JUNCTION, "--out", tmp_path / "c8")
+    [ppo] = scores(tmp_path / "ev").values()
+    [constant] = scores(tmp_path / "c8").values()
+    assert ppo >= constant + 30.0, (ppo, constant)
+
+
+def test_bad_inputs_fail_with_clear_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert (
+        main(["baselines", "train", "bc", "--data", str(tmp_path / "none"), "--out", str(tmp_path / "o")])
+        == 2
+    )
+    assert "no Minari dataset" in capsys.readouterr().err
+    assert main(["baselines", "train", "bc", "--out", str(tmp_path / "o")]) == 2
+    assert "--data" in capsys.readouterr().err
+    assert main(["r4", "evaluate", "--agent", f"sb3:{tmp_path / 'x.zip'}", "--out", str(tmp_path / "e")]) == 2
+    assert "file not found" in capsys.readouterr().err
+
+
+def test_sac_trains_and_plugs_in_as_an_agent(tmp_path: Path) -> None:
+    out = tmp_path / "sac"
+    cli(
+        *("baselines", "train", "sac", "--suite", INTERSECTION, "--held-out", "0", "--steps", "300"),
+        *("--envs", "1", "--hp", "learning_starts=100", "--hp", "buffer_size=1000", "--hp", "batch_size=32"),
+        *("--hp", 'policy_kwargs={"net_arch": [32, 32]}'),
+        *("--checkpoint-every", "200", "--out", out),
+    )
+    assert read_meta(out / "model.zip")["algo"] == "sac"
+    # SAC checkpoints carry the replay buffer, so a resumed run continues off-policy learning.
+    assert (out / "checkpoints" / "rl_model_replay_buffer_200_steps.pkl").is_file()
+    model = f"sb3:{out / 'model.zip'}"
+    cli("r4", "run", "--agent", model, "--scenario", INTERSECTION, "--out", tmp_path / "ev")
+
+
+def test_a_bev_cnn_policy_trains_and_sees_the_protocols_bev_when_evaluated(tmp_path: Path) -> None:
+    out = tmp_path / "bev"
+    cli(
+        *("baselines", "train", "ppo", "--suite", INTERSECTION, "--held-out", "0", "--obs", "state+bev"),
+        *("--bev-size", "64", "--steps", "64", "--envs", "1", "--hp", "n_steps=64", "--hp", "batch_size=32"),
+        *("--out", out),
+    )
+    agent = Sb3Agent(out / "model.zip")
+    assert agent.uses_images is True and agent.wrapper.bev_size == 64
+    # The runner renders the protocol's 800×800 BEV for an image agent; the agent downsamples it.
+    model = f"sb3:{out / 'model.zip'}"
+    cli("r4", "run", "--agent", model, "--scenario", INTERSECTION, "--out", tmp_path / "ev")
+    record = json.loads(next((tmp_path / "ev" / "scenes").glob("*/scene_score.json")).read_text())
+    assert record["decisions"] > 0

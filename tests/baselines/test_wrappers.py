@@ -1,0 +1,212 @@
+"""RL-ready wrappers: Gymnasium's and SB3's env checkers, codecs, the shaped reward leaving the
+benchmark score alone, the suite sampler and its split, and the `sb3:` agent prefix."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+
+from drivehierarchy import ConfigError
+from drivehierarchy.agents.base import run_episode
+from drivehierarchy.agents.expert import ExpertAgent
+from drivehierarchy.baselines.wrappers import (
+    ActionCodec,
+    ObsCodec,
+    SuiteEnv,
+    WrapperConfig,
+    make_env,
+    split_suite,
+)
+from drivehierarchy.benchmark.r4 import runner
+from drivehierarchy.envs.config import R4Config
+from drivehierarchy.envs.r4 import STATE_FIELDS, DriveHierarchyR4Env
+from drivehierarchy.scenarios import builtin_root, builtin_scenarios
+
+PED = builtin_root() / "r4" / "01_pedestrian" / "town01_midblock_crossing.toml"
+BRAKE = builtin_root() / "r4" / "07_sudden_brake" / "town01_lead_brakes.toml"
+# Score-record fields measuring wall-clock time (names before/after protocol v2).
+WALL_CLOCK_KEYS = ("wall_duration", "duration_system")
+STATE_ONLY = R4Config(front=None, bev=None, prompt=False)
+
+
+@pytest.mark.parametrize(
+    "cfg",
+    [
+        WrapperConfig(),
+        WrapperConfig(action="raw", reward="score"),
+        WrapperConfig(obs="bev", bev_size=64),
+        WrapperConfig(obs="state+bev", bev_size=64),
+    ],
+    ids=["state-decision-shaped", "state-raw-score", "bev", "state+bev"],
+)
+def test_gymnasium_and_sb3_checkers_pass(cfg: WrapperConfig) -> None:
+    from gymnasium.utils.env_checker import check_env as gym_check
+    from stable_baselines3.common.env_checker import check_env as sb3_check
+
+    env = make_env([PED, BRAKE], cfg, monitor=False)
+    gym_check(env, skip_render_check=True)
+    sb3_check(env, warn=True)
+    obs, _ = env.reset(seed=1)
+    assert env.observation_space.contains(obs)
+    env.close()
+
+
+def test_action_codec_maps_the_box_and_round_trips() -> None:
+    dec = ActionCodec(WrapperConfig(max_speed_mps=16.0))
+    np.testing.assert_allclose(dec.decode(np.array([-1.0, -1.0])), [-1.0, 0.0])
+    np.testing.assert_allclose(dec.decode(np.array([0.5, 0.0])), [0.5, 8.0])  # untrained policy drives
+    np.testing.assert_allclose(dec.decode(np.array([1.0, 1.0])), [1.0, 16.0])
+    np.testing.assert_allclose(dec.decode(np.array([3.0, 9.0])), [1.0, 16.0])  # clipped
+    a = np.array([0.3, -0.4], np.float32)
+    np.testing.assert_allclose(dec.encode(dec.decode(a)), a, atol=1e-6)
+    raw = ActionCodec(WrapperConfig(action="raw"))
+    np.testing.assert_allclose(raw.decode(np.array([0.2, 0.5])), [0.5, 0.0, 0.2])  # throttle, brake, steer
+    np.testing.assert_allclose(raw.decode(np.array([-0.2, -0.7])), [0.0, 0.7, -0.2])
+    np.testing.assert_allclose(raw.encode(raw.decode(a)), a, atol=1e-6)
+
+
+def test_obs_codec_scales_state_and_one_hots_the_command() -> None:
+    env = DriveHierarchyR4Env(scenario=PED, config=STATE_ONLY)
+    obs, _ = env.reset(seed=0)
+    codec = ObsCodec(WrapperConfig())
+    x = codec.state(obs["state"])
+    assert x.shape == (len(STATE_FIELDS) - 1 + 6,) and x.dtype == np.float32
+    cmd = int(obs["state"][STATE_FIELDS.index("command")])
+    assert x[-6:].sum() == 1.0 and x[-6 + cmd - 1] == 1.0
+    assert np.all(np.abs(x) <= 10.0)
+    # The protocol's 800×800 BEV is area-downsampled to the policy's size.
+    big = DriveHierarchyR4Env(scenario=PED, config=R4Config(front=None, prompt=False))
+    obs_big, _ = big.reset(seed=0)
+    img = ObsCodec(WrapperConfig(obs="bev", bev_size=128)).bev(obs_big)
+    assert img.shape == (128, 128, 3) and img.dtype == np.uint8 and img.std() > 0
+
+
+def test_shaped_reward_never_changes_the_benchmark_score() -> None:
+    """Same scenario, seed and actions: the shaped env's score record equals the plain env's."""
+    actions = [np.array([0.0, 0.2], np.float32)] * 40 + [np.array([0.05, -0.5], np.float32)] * 200
+    records, returns = [], []
+    for reward in ("shaped", "score"):
+        env = make_env([BRAKE], WrapperConfig(reward=reward), monitor=False)
+        env.reset(seed=3)
+        total_env = 0.0
+        for a in actions:
+            _, _, term, trunc, info = env.step(a)
+            total_env += info.get("score_reward", 0.0) if reward == "shaped" else 0.0
+            if term or trunc:
+                break
+        record = env.unwrapped.score()
+        for key in WALL_CLOCK_KEYS:  # wall-clock time, the one non-simulated field
+            record["meta"].pop(key, None)
+        records.append(record)
+        returns.append(total_env)
+    assert records[0] == records[1]
+    # The env's own rewards (kept in info) still sum to S_R4 / 100.
+    assert returns[0] == pytest.approx(records[0]["score_composed"] / 100.0, abs=1e-6)
+
+
+def test_split_is_by_file_stable_and_validated() -> None:
+    suite = builtin_scenarios()
+    train, held = split_suite(suite, 0.3)
+    assert len(held) == 3 and len(train) == 7 and not set(train) & set(held)
+    assert split_suite(list(reversed(suite)), 0.3)[1] == sorted(held, key=list(reversed(suite)).index)
+    train2, held2 = split_suite(suite, ["01_pedestrian/town01_midblock_crossing"])
+    assert [p.parent.name for p in held2] == ["01_pedestrian"] and len(train2) == 9
+    with pytest.raises(ConfigError, match="99_none/x"):
+        split_suite(suite, ["99_none/x"])
+    with pytest.raises(ConfigError, match="held_out"):
+        split_suite(suite, 1.0)
+
+
+def test_suite_env_samples_with_the_seed_and_is_deterministic() -> None:
+    def episode(seed: int) -> tuple[list[str], list[str]]:
+        env = SuiteEnv([PED, BRAKE], STATE_ONLY)
+        picked, hashes = [], []
+        env.reset(seed=seed)
+        for _ in range(6):
+            _, info = env.reset()
+            picked.append(Path(info["scenario"]).parent.name)
+            res = run_episode(env, ExpertAgent(), options={"scenario": info["scenario"]}, max_steps=20)
+            hashes.append(res.score["ticks"])
+        return picked, [str(h) for h in hashes]
+
+    a, b = episode(7), episode(7)
+    assert a == b
+    assert set(a[0]) == {"01_pedestrian", "07_sudden_brake"}
+    # The expert drives through the sampler unchanged (privileged access follows the scenario).
+    env = SuiteEnv([PED, BRAKE], STATE_ONLY, order="cycle")
+    scores = [run_episode(env, ExpertAgent()).score["score_composed"] for _ in range(2)]
+    assert min(scores) >= 90.0
+
+
+def test_registry_prefix_resolves_and_errors_clearly(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="file not found"):
+        runner.AGENTS.create(f"sb3:{tmp_path / 'missing.zip'}")
+    bad = tmp_path / "plain.zip"
+    bad.write_bytes(b"not a zip")
+    with pytest.raises(ConfigError, match="not a zip"):
+        runner.AGENTS.create(f"sb3:{bad}")
+    with pytest.raises(ConfigError, match="unknown agent"):
+        runner.AGENTS.create("nope:thing")
+    assert "sb3:..." in runner.AGENTS.names()
+    reg = runner.AgentRegistry()
+    reg.register_prefix("k", lambda arg: runner.ConstantAgent([0.0, float(arg)], name=f"k:{arg}"))
+    assert reg.create("k:3").name == "k:3"
+    with pytest.raises(ValueError, match="already"):
+        reg.register_prefix("k", lambda arg: runner.ConstantAgent([0.0, 0.0]))
+
+
+def test_wrapped_env_is_deterministic_for_seed_and_actions() -> None:
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-1, 1, (300, 2)).astype(np.float32)
+    runs = []
+    for _ in range(2):
+        env = make_env([PED, BRAKE], WrapperConfig(), monitor=False)
+        obs, info = env.reset(seed=11)
+        trace = [("reset", info["scenario"], obs.tobytes())]
+        for a in actions:
+            obs, r, term, trunc, info = env.step(a)
+            trace.append(("step", r, obs.tobytes()))
+            if term or trunc:
+                obs, info = env.reset()
+                trace.append(("reset", info["scenario"], obs.tobytes()))
+        runs.append(trace)
+    assert runs[0] == runs[1]
+    assert sum(t[0] == "reset" for t in runs[0]) >= 2
+
+
+def test_gymnasium_async_vector_env_runs_the_wrappers() -> None:
+    import gymnasium as gym
+
+    def make() -> gym.Env:
+        return make_env([PED, BRAKE], WrapperConfig(), monitor=False)
+
+    venv = gym.vector.AsyncVectorEnv([make, make])
+    try:
+        obs, _ = venv.reset(seed=[1, 2])
+        assert obs.shape == (2, ObsCodec(WrapperConfig()).state_dim)
+        for _ in range(50):
+            obs, rew, _, _, _ = venv.step(np.zeros((2, 2), np.float32))
+        assert np.all(np.isfinite(obs)) and rew.shape == (2,)
+    finally:
+        venv.close()
+
+
+def test_sb3_vec_envs_in_subprocesses_and_in_process() -> None:
+    from drivehierarchy.baselines.rl import make_vec_env
+
+    for vec in ("subproc", "dummy"):
+        venv = make_vec_env([PED, BRAKE], WrapperConfig(), 2, seed=5, vec=vec)
+        try:
+            obs = venv.reset()
+            assert obs.shape == (2, ObsCodec(WrapperConfig()).state_dim)
+            for _ in range(30):
+                obs, rew, _, _ = venv.step(np.zeros((2, 2), np.float32))
+            assert np.all(np.isfinite(obs)) and rew.shape == (2,)
+        finally:
+            venv.close()
+    with pytest.raises(ConfigError, match="vec"):
+        make_vec_env([PED], WrapperConfig(), 1, vec="threads")

@@ -1,0 +1,315 @@
+"""Live background traffic: SUMO co-simulated through libsumo (docs/traffic.md).
+
+Every test starts the real SUMO of the `eclipse-sumo` / `libsumo` packages on the project's
+town01 network (or the suite's Ingolstadt net) and drives the real Rust world.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("libsumo")
+
+from drivehierarchy import _core
+from drivehierarchy._core import ConfigError, ScenarioError, SimulationError
+from drivehierarchy.envs.r4 import DriveHierarchyR4Env
+from drivehierarchy.scenarios import builtin_root, sumo_home
+
+TOWN01 = builtin_root() / "maps" / "town01" / "town01.net.xml"
+BENCH = builtin_root() / "bench" / "town01_sumo_traffic.toml"
+FLOW_SCENARIO = "06_traffic_flow/ingolstadt_westbound_flow"
+IS_TRAFFIC = 7  # column of actors_array
+
+
+def write_scenario(tmp_path: Path, body: str, name: str = "s.toml") -> Path:
+    head = f'version = 1\nid = "t"\ncategory = "06_traffic_flow"\nmap = "{TOWN01.as_posix()}"\n'
+    p = tmp_path / name
+    p.write_text(head + textwrap.dedent(body), encoding="utf-8")
+    return p
+
+
+def make_env(scenario: str | Path, **kw: object) -> DriveHierarchyR4Env:
+    return DriveHierarchyR4Env(scenario=scenario, front=None, bev=None, prompt=False, **kw)
+
+
+def traffic_rows(env: DriveHierarchyR4Env) -> np.ndarray:
+    a = env.sim.actors_array()
+    return a[a[:, IS_TRAFFIC] == 1.0]
+
+
+def frame(env: DriveHierarchyR4Env) -> tuple[np.ndarray, np.ndarray]:
+    """Ego pose and traffic rows (ego frame: forward, left) of the current tick."""
+    ego = env.sim.ego_array()
+    rows = traffic_rows(env)
+    d = rows[:, 1:3] - ego[:2]
+    fwd = np.array([np.cos(ego[2]), np.sin(ego[2])])
+    left = np.array([-fwd[1], fwd[0]])
+    rel = np.stack([d @ fwd, d @ left], axis=1)
+    return ego, np.concatenate([rows, rel], axis=1)
+
+
+# -- the [traffic] table ---------------------------------------------------------------------------
+
+
+def test_traffic_table_errors_name_the_field(tmp_path: Path) -> None:
+    base = """
+    [ego]
+    start = { lane = "W2C_1", s = 20.0 }
+    destination = { lane = "C2T_1", s = 100.0 }
+    """
+    cases = {
+        '[traffic]\nmode = "fast"\n': "traffic.mode",
+        '[[traffic.vehicles]]\nroute = ["W2C", "nowhere"]\n': "traffic.vehicles[0].route[1]",
+        '[[traffic.vehicles]]\nroute = ["W2C"]\nvtype = "spaceship"\n': "traffic.vehicles[0].vtype",
+        '[[traffic.flows]]\nfrom = "W2C"\nto = "C2T"\n': "traffic.flows[0]",
+        '[[traffic.flows]]\nfrom = "W2C"\nto = "C2T"\nprobability = 1.5\n': "traffic.flows[0].probability",
+        "[traffic.random]\ndensity_per_km = -1.0\n": "traffic.random.density_per_km",
+        '[[traffic.vehicles]]\nroute = ["W2C"]\ndepart_lane = "leftmost"\n': "depart_lane",
+        '[traffic]\nvtypes = "missing.add.xml"\n': "traffic.vtypes",
+        "[traffic]\nwarmup = 3\n": "warmup",
+    }
+    for i, (table, field) in enumerate(cases.items()):
+        p = write_scenario(tmp_path, base + table, f"bad{i}.toml")
+        with pytest.raises(ScenarioError) as e:
+            _core.validate_scenario(str(p), sumo_home())
+        assert str(p) in str(e.value) and field in str(e.value), (table, str(e.value))
+
+
+def test_routes_are_seeded_and_dense_enough() -> None:
+    env = make_env(BENCH)
+    try:
+        a, b, c = (env.sim.traffic_routes(s) for s in (1, 1, 2))
+        assert a == b and a != c
+        vehicles = a.count("<vehicle ")
+        assert vehicles >= 50, vehicles
+        assert a.count("<flow ") == 2 and '<route id="dh_ego_route" edges="W2C C2T"/>' in a
+    finally:
+        env.close()
+
+
+def test_config_overrides_the_scenario_mode(tmp_path: Path) -> None:
+    env = make_env(BENCH, traffic="none")
+    try:
+        assert env.traffic_mode == "none"
+        env.reset(seed=0)
+        assert len(traffic_rows(env)) == 0 and env.sim.traffic is None
+    finally:
+        env.close()
+    with pytest.raises(ConfigError, match="traffic"):
+        make_env(BENCH, traffic="carla")
+    # A scenario without a [traffic] table runs SUMO when asked (no demand: just the ego).
+    p = write_scenario(tmp_path, '[ego]\nstart = { lane = "W2C_1", s = 20.0 }\nroute_edges = ["W2C"]\n')
+    env = make_env(p, traffic="sumo")
+    try:
+        env.reset(seed=0)
+        env.step(np.array([0.0, 5.0]))
+        assert env.sim.traffic == "sumo" and len(traffic_rows(env)) == 0
+    finally:
+        env.close()
+
+
+def test_sumo_start_failure_carries_sumos_message(tmp_path: Path) -> None:
+    (tmp_path / "bad.add.xml").write_text(
+        '<additional><vType id="car" carFollowModel="NoSuchModel"/></additional>', encoding="utf-8"
+    )
+    p = write_scenario(
+        tmp_path,
+        """
+        [ego]
+        start = { lane = "W2C_1", s = 20.0 }
+        route_edges = ["W2C"]
+        [traffic]
+        vtypes = "bad.add.xml"
+        [[traffic.vehicles]]
+        route = ["W2C", "C2T"]
+        """,
+    )
+    env = make_env(p)
+    try:
+        with pytest.raises(SimulationError) as e:
+            env.reset(seed=0)
+        assert "SUMO failed to start" in str(e.value) and "NoSuchModel" in str(e.value), str(e.value)
+        # The failure is not sticky: a working scenario starts in the same process afterwards.
+        env.reset(seed=0, options={"scenario": str(BENCH)})
+        assert len(traffic_rows(env)) >= 50
+    finally:
+        env.close()
+
+
+def test_one_sumo_per_process() -> None:
+    a, b = make_env(BENCH), make_env(BENCH)
+    try:
+        a.reset(seed=0)
+        with pytest.raises(SimulationError, match="one simulation per process"):
+            b.reset(seed=0)
+        a.close()
+        b.reset(seed=0)  # free again once the first env is closed
+    finally:
+        a.close()
+        b.close()
+
+
+# -- behaviour -------------------------------------------------------------------------------------
+
+
+def test_sumo_queues_behind_a_stopped_ego_and_never_passes_through(tmp_path: Path) -> None:
+    # One-lane road T2R: the ego stands 40 m in while SUMO runs 60 s of warm-up (the protocol
+    # ends an episode after 5 s at rest, so the long wait happens in the warm-up, where SUMO
+    # sees the ego standing at its start), then for 4.5 s of the episode with the brake held.
+    p = write_scenario(
+        tmp_path,
+        """
+        [ego]
+        start = { lane = "T2R_0", s = 40.0 }
+        route_edges = ["T2R"]
+        [traffic]
+        warmup_s = 60.0
+        [[traffic.flows]]
+        from = "C2T"
+        to = "R2AS"
+        vehs_per_hour = 900
+        """,
+    )
+    env = make_env(p, action_mode="raw")
+    try:
+        env.reset(seed=3)
+        queued_max = 0
+        for step in range(19):
+            if step:
+                _, _, term, _, info = env.step(np.array([0.0, 1.0, 0.0]))
+                assert not term and not info["contacts"], info
+            ego, rows = frame(env)
+            fwd, lat = rows[:, -2], rows[:, -1]
+            # Every vehicle came from behind; none got past (through) the ego.
+            assert len(rows) >= 5 and np.all(fwd < 0), rows
+            behind = (np.abs(lat) < 1.5) & (fwd > -80)
+            # Along the queue nobody overlaps the car ahead (or the ego).
+            order = np.argsort(-fwd[behind])
+            pos = fwd[behind][order]
+            half = rows[behind][order][:, 5] / 2
+            fronts = np.concatenate([[-ego[4] / 2], pos[:-1] - half[:-1]])
+            assert np.all(pos + half <= fronts + 1e-6), (pos, half, fronts)
+            queued_max = max(queued_max, int((behind & (rows[:, 4] < 0.1)).sum()))
+        assert queued_max >= 4, queued_max
+    finally:
+        env.close()
+
+
+def test_sumo_vehicles_stop_at_a_red_sumo_switches(tmp_path: Path) -> None:
+    # Light C gives W2C/T2C green for the first 45 s of its cycle; N2C is red meanwhile
+    # (scenarios/maps/README.md). SUMO runs the program; the world's signal heads follow it.
+    p = write_scenario(
+        tmp_path,
+        """
+        [ego]
+        start = { lane = "W2C_1", s = 20.0 }
+        route_edges = ["W2C", "C2T", "T2E"]
+        [traffic]
+        warmup_s = 30.0
+        [[traffic.flows]]
+        from = "N2C"
+        to = "C2S"
+        vehs_per_hour = 1200
+        """,
+    )
+    env = make_env(p)  # the expert drives east on green meanwhile
+    try:
+        env.reset(seed=0)
+        waited, crossed_on_green, head_colours = 0, 0, set()
+        for _ in range(4 * 75):
+            if env.step(env.expert_action())[2]:
+                break
+            colour = dict(((lane, c) for _, lane, c in env.sim.light_states()))["N2C_1"]
+            head_colours.add(colour)
+            rows = traffic_rows(env)
+            southbound = np.abs(np.sin(rows[:, 3]) + 1.0) < 0.1  # heading ≈ −90°
+            near_x = np.abs(rows[:, 1]) < 8.0
+            inside = southbound & near_x & (rows[:, 2] < 8.0) & (rows[:, 2] > -8.0)
+            if colour == "red":
+                # Nobody enters the crossing on red; the first car waits at the line.
+                assert not inside.any(), rows[inside]
+                at_line = southbound & near_x & (rows[:, 2] > 8.0) & (rows[:, 2] < 20.0) & (rows[:, 4] < 0.1)
+                waited = max(waited, int(at_line.sum()))
+            elif colour == "green":
+                crossed_on_green += int(inside.sum())
+        assert {"red", "green"} <= head_colours, head_colours
+        assert waited >= 1 and crossed_on_green > 0, (waited, crossed_on_green)
+    finally:
+        env.close()
+
+
+def run_expert(scenario: str | Path, seed: int, steps: int | None = None) -> dict[str, object]:
+    env = make_env(scenario)
+    try:
+        env.reset(seed=seed)
+        digest = hashlib.sha256()
+        counts = [len(traffic_rows(env))]
+        info: dict[str, object] = {}
+        n = 0
+        while steps is None or n < steps:
+            _, _, term, _, info = env.step(env.expert_action())
+            digest.update(np.ascontiguousarray(env.sim.actors_array()).tobytes())
+            counts.append(len(traffic_rows(env)))
+            n += 1
+            if term:
+                break
+        return {
+            "traffic": digest.hexdigest(),
+            "trajectory": env.sim.trajectory_hash,
+            "counts": counts,
+            "info": info,
+            "score": env.score(),
+        }
+    finally:
+        env.close()
+
+
+def test_fifty_vehicles_expert_reaches_destination_without_collision() -> None:
+    out = run_expert(BENCH, seed=0)
+    counts = out["counts"]
+    assert isinstance(counts, list) and counts[0] >= 50, counts[:3]
+    info = out["info"]
+    assert isinstance(info, dict)
+    assert info["termination_reason"] == "destination_reached", info["events"]
+    assert not [e for e in info["events"] if str(e["type"]).startswith("collision")], info["events"]
+
+
+def test_sumo_traffic_is_deterministic_across_runs_and_processes() -> None:
+    a = run_expert(BENCH, seed=5, steps=60)
+    b = run_expert(BENCH, seed=5, steps=60)
+    c = run_expert(BENCH, seed=6, steps=60)
+    assert a["traffic"] == b["traffic"] and a["trajectory"] == b["trajectory"]
+    assert a["traffic"] != c["traffic"]
+    code = (
+        "import json, sys; sys.path.insert(0, sys.argv[1]); import test_traffic_sumo as t; "
+        "r = t.run_expert(t.BENCH, seed=5, steps=60); print(json.dumps([r['traffic'], r['trajectory']]))"
+    )
+    res = subprocess.run(
+        [sys.executable, "-c", code, str(Path(__file__).parent)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=True,
+    )
+    assert json.loads(res.stdout.strip().splitlines()[-1]) == [a["traffic"], a["trajectory"]]
+
+
+def test_builtin_traffic_flow_scenario_runs_on_sumo_by_default() -> None:
+    env = make_env(FLOW_SCENARIO)
+    try:
+        assert env.traffic_mode == "sumo"
+        env.reset(seed=0)
+        assert len(traffic_rows(env)) >= 5  # the start frame (gallery) shows SUMO vehicles
+        for _ in range(8):
+            env.step(env.expert_action())
+        assert env.sim.traffic == "sumo"
+    finally:
+        env.close()
