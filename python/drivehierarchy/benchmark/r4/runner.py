@@ -46,6 +46,7 @@ import functools
 import hashlib
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -670,30 +671,38 @@ async def evaluate_async(
     pool = ThreadPoolExecutor(max_workers=max(2, opts.jobs), thread_name_prefix="r4")
     loop = asyncio.get_running_loop()
 
+    sumo_lock = asyncio.Lock()
+
     async def one(job: Job) -> None:
-        async with sem:
-            if aborted:
-                return  # the batch is stopping: start nothing new
-            if remote is not None:
-                line = await remote.remote(job, opts, out)
-            elif driver is not None:
-                line = await drive_vlm_scene(job, opts, out, driver, pool)
-            else:
-                line = await loop.run_in_executor(pool, run_scene, job, opts, out)
-            i = index[job.key]
-            if "aborted" in line:
-                aborted.append(line)
-                _append_line(out / "aborted.jsonl", line)
-                log(f"[{i}/{len(jobs)}] {job.key}: ABORTED ({line['aborted']}; {line.get('last_error')})")
-            else:
-                _append_line(out / "results.jsonl", line)
-                done[job.key] = line
-                s = line["score"]
-                log(
-                    f"[{i}/{len(jobs)}] {job.key}: S_R4 {s['score_composed']:.2f} ({s['status']}, "
-                    f"{s['termination_reason']}) in {line['wall_s']:.2f} s"
-                )
-            progress.update(line)
+        # libsumo runs one simulation per process: scenarios with SUMO traffic take turns here
+        # (Ray tasks run in their own worker processes).
+        lock = sumo_lock if remote is None and uses_sumo(job.scenario, opts.config) else _NoLock()
+        async with lock, sem:
+            await run_one(job)
+
+    async def run_one(job: Job) -> None:
+        if aborted:
+            return  # the batch is stopping: start nothing new
+        if remote is not None:
+            line = await remote.remote(job, opts, out)
+        elif driver is not None:
+            line = await drive_vlm_scene(job, opts, out, driver, pool)
+        else:
+            line = await loop.run_in_executor(pool, run_scene, job, opts, out)
+        i = index[job.key]
+        if "aborted" in line:
+            aborted.append(line)
+            _append_line(out / "aborted.jsonl", line)
+            log(f"[{i}/{len(jobs)}] {job.key}: ABORTED ({line['aborted']}; {line.get('last_error')})")
+        else:
+            _append_line(out / "results.jsonl", line)
+            done[job.key] = line
+            s = line["score"]
+            log(
+                f"[{i}/{len(jobs)}] {job.key}: S_R4 {s['score_composed']:.2f} ({s['status']}, "
+                f"{s['termination_reason']}) in {line['wall_s']:.2f} s"
+            )
+        progress.update(line)
 
     try:
         await asyncio.gather(*(one(j) for j in todo))
@@ -714,6 +723,25 @@ async def evaluate_async(
     results = [done[j.key] for j in jobs]
     write_summary(out, results, model=_model_name(opts))
     return results
+
+
+class _NoLock:
+    async def __aenter__(self) -> None:
+        return None
+
+    async def __aexit__(self, *exc: object) -> None:
+        return None
+
+
+_SUMO_MODE = re.compile(r'^\s*\[traffic\][^\[]*?^\s*mode\s*=\s*"sumo"', re.MULTILINE | re.DOTALL)
+
+
+def uses_sumo(scenario: Path, config: R4Config) -> bool:
+    """Whether the scenario runs SUMO background traffic (config override, else its `[traffic]`)."""
+    mode = getattr(config, "traffic", None)
+    if mode is not None:
+        return bool(mode == "sumo")
+    return bool(_SUMO_MODE.search(scenario.read_text(encoding="utf-8")))
 
 
 def evaluate(
