@@ -9,7 +9,13 @@ most requests seen in flight at once.
     with ScriptedOpenAIServer(lambda req: "yes", latency_s=0.02) as base_url:
         ...  # base_url == "http://127.0.0.1:<port>/v1"
 
-Command line: `python -m drivehierarchy.testing.openai_server --port 8000 --answer yes`.
+`route_driver` is a scripted closed-loop driver for R4: it reads the speed and the local route
+points from the protocol prompt (PROTOCOL §2.2) and answers `steer: ..\ntarget_speed_mps: ..`
+by pure pursuit, so `r4 evaluate --agent vlm` can drive real episodes against this server.
+`malformed_reply_rate` answers a well-formed completion whose text has no action in it.
+
+Command line: `python -m drivehierarchy.testing.openai_server --port 8000 --answer yes`
+(`--driver` for the R4 driver).
 """
 
 from __future__ import annotations
@@ -19,7 +25,9 @@ import base64
 import binascii
 import hashlib
 import json
+import math
 import random
+import re
 import sys
 import threading
 import time
@@ -91,6 +99,39 @@ class ChatRequest:
 
 
 Policy = Callable[[ChatRequest], "str | Fault"]
+
+_ROUTE_RE = re.compile(r"\(forward_m, right_m\): \[([^\]]*)\]")
+_POINT_RE = re.compile(r"\((-?[\d.]+), (-?[\d.]+)\)")
+_SPEED_RE = re.compile(r"driving at the speed of (-?[\d.]+) m/s")
+MALFORMED_REPLY = "I would keep an eye on the road and drive carefully."
+
+
+def route_points(text: str) -> list[tuple[float, float]]:
+    """The (forward_m, right_m) route points of a §2.2 prompt; [] when there are none."""
+    m = _ROUTE_RE.search(text)
+    if m is None:
+        return []
+    return [(float(f), float(r)) for f, r in _POINT_RE.findall(m.group(1))]
+
+
+def route_driver(req: ChatRequest) -> str:
+    """Pure pursuit on the prompt's route points (8 m look-ahead); slower in curves, stops at
+    the end of the route. Deterministic: the same prompt gives the same reply."""
+    text = req.last_text
+    pts = route_points(text)
+    if not pts:
+        return "steer: 0.0\ntarget_speed_mps: 0.0"
+    ahead = [p for p in pts if p[0] > 1.0] or pts
+    goal = next((p for p in ahead if math.hypot(*p) >= 8.0), ahead[-1])
+    dist = max(math.hypot(*goal), 1.0)
+    # Pure pursuit: curvature 2·right/d², steering angle atan(wheelbase·κ), normalised by 35°.
+    angle = math.atan(2.9 * 2.0 * goal[1] / (dist * dist))
+    steer = max(-1.0, min(1.0, angle / math.radians(35.0)))
+    remaining = math.hypot(*pts[-1])
+    target = 4.0 if abs(steer) > 0.25 else 8.0
+    if remaining < 6.0:
+        target = min(target, 3.0)
+    return f"steer: {steer:.3f}\ntarget_speed_mps: {target:.1f}"
 
 
 def _image_part(url: str) -> ImagePart:
@@ -166,6 +207,7 @@ class ScriptedOpenAIServer:
         rate_limit_rate: float = 0.0,
         malformed_rate: float = 0.0,
         empty_choices_rate: float = 0.0,
+        malformed_reply_rate: float = 0.0,
         fail_first_attempts: int = 0,
         seed: int = 0,
         models: tuple[str, ...] = ("test-model",),
@@ -179,6 +221,7 @@ class ScriptedOpenAIServer:
         self.rate_limit_rate = rate_limit_rate
         self.malformed_rate = malformed_rate
         self.empty_choices_rate = empty_choices_rate
+        self.malformed_reply_rate = malformed_reply_rate
         self.fail_first_attempts = fail_first_attempts
         self.models = models
         self.api_key = api_key
@@ -264,6 +307,9 @@ class ScriptedOpenAIServer:
             acc += rate
             if roll < acc:
                 return req, fault
+        if roll < acc + self.malformed_reply_rate:
+            self._count_fault("malformed_reply")
+            return req, MALFORMED_REPLY
         return req, self.policy(req)
 
     def completion_body(self, req: ChatRequest, text: str) -> dict[str, Any]:
@@ -300,6 +346,9 @@ class _Server(ThreadingHTTPServer):
 def _make_handler(owner: ScriptedOpenAIServer) -> type[BaseHTTPRequestHandler]:
     class Handler(BaseHTTPRequestHandler):
         protocol_version = "HTTP/1.1"  # keep-alive, so clients can reuse connections
+        # Headers and body go out in separate writes: without TCP_NODELAY, Nagle's algorithm and
+        # the client's delayed ACK stall every reply by ~40 ms.
+        disable_nagle_algorithm = True
 
         def log_message(self, format: str, *args: Any) -> None:  # quiet by default
             pass
@@ -404,6 +453,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--port", type=int, default=8000)
     parser.add_argument("--answer", default="ok", help="reply text for every request (default: ok)")
     parser.add_argument("--echo", action="store_true", help="reply with the last user text part instead")
+    parser.add_argument(
+        "--driver", action="store_true", help="answer R4 decisions with the scripted route-following driver"
+    )
+    parser.add_argument(
+        "--malformed-reply-rate", type=float, default=0.0, help="fraction of replies without an action"
+    )
     parser.add_argument("--latency-ms", type=float, default=0.0)
     parser.add_argument("--error-rate", type=float, default=0.0, help="fraction of HTTP 500 replies")
     parser.add_argument("--rate-limit-rate", type=float, default=0.0, help="fraction of HTTP 429 replies")
@@ -417,6 +472,8 @@ def main(argv: list[str] | None = None) -> int:
     answer: str = args.answer
 
     def policy(req: ChatRequest) -> str:
+        if args.driver:
+            return route_driver(req)
         return req.last_text if args.echo else answer
 
     server = ScriptedOpenAIServer(
@@ -426,6 +483,7 @@ def main(argv: list[str] | None = None) -> int:
         rate_limit_rate=args.rate_limit_rate,
         malformed_rate=args.malformed_rate,
         empty_choices_rate=args.empty_choices_rate,
+        malformed_reply_rate=args.malformed_reply_rate,
         models=tuple(args.models or ["test-model"]),
         seed=args.seed,
         host=args.host,

@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+from drivehierarchy._core import ConfigError
 from drivehierarchy.benchmark.r4 import runner
 from drivehierarchy.scenarios import resolve_scenario
 
@@ -16,11 +17,35 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     cmds = r4.add_subparsers(dest="r4_command", required=True)
 
     def common(p: argparse.ArgumentParser) -> None:
-        p.add_argument("--agent", default="expert", help=f"agent name ({', '.join(runner.AGENTS.names())})")
+        names = ", ".join([*runner.AGENTS.names(), runner.VLM_AGENT])
+        p.add_argument("--agent", default="expert", help=f"agent name ({names})")
         p.add_argument("--out", type=Path, required=True, help="output directory (resumable)")
-        p.add_argument("--seed", type=int, default=0)
+        p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
         p.add_argument("--frames", action="store_true", help="save front and BEV PNGs of every decision")
         p.add_argument("--video", action="store_true", help="save an animated GIF of the front camera")
+        p.add_argument("--progress", action="store_true", help="progress bar on stderr (default: on a TTY)")
+        v = p.add_argument_group("VLM agent (--agent vlm; docs/vlm.md)")
+        v.add_argument("--base-url", help="OpenAI-compatible server, e.g. http://localhost:8000/v1")
+        v.add_argument("--model", help="served model id, or a preset key (drivehierarchy r4 models)")
+        v.add_argument("--api-key-env", help="environment variable holding the API key")
+        v.add_argument("--temperature", type=float, default=0.0)
+        v.add_argument("--max-tokens", type=int, default=256, help="bound on reply tokens (default 256)")
+        v.add_argument("--timeout", type=float, default=60.0, help="seconds per request (default 60)")
+        v.add_argument("--max-retries", type=int, default=2, help="retries per request (default 2)")
+        v.add_argument(
+            "--max-transport-failures",
+            type=int,
+            default=3,
+            help="abort a scenario after this many decisions in a row without a reply (default 3)",
+        )
+        v.add_argument("--blind", action="store_true", help="control: text only, no images")
+        v.add_argument("--no-bev", action="store_true", help="control: front image only")
+        v.add_argument("--corrupt", choices=["noise", "blur", "dark"], help="control: degrade both images")
+        v.add_argument(
+            "--latency-aware",
+            action="store_true",
+            help="control: the world keeps moving for each reply's latency (previous control held)",
+        )
 
     run = cmds.add_parser("run", help="drive one scenario")
     run.add_argument("--scenario", required=True, help="scenario file or built-in id")
@@ -29,6 +54,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
     ev = cmds.add_parser("evaluate", help="drive a whole suite and print the summary table")
     ev.add_argument("--suite", default="builtin", help="'builtin', a folder of scenarios, or one file")
+    ev.add_argument("--jobs", type=int, default=1, help="scenarios in flight at once (default 1)")
+    ev.add_argument("--seeds", type=int, default=1, help="run every scenario with K seeds (default 1)")
+    ev.add_argument("--ray", metavar="ADDRESS", help="run scenarios as Ray tasks ('local' starts one)")
     common(ev)
     ev.set_defaults(func=_evaluate)
 
@@ -36,27 +64,103 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     rs.add_argument("dir", type=Path)
     rs.set_defaults(func=_rescore)
 
+    rep = cmds.add_parser("report", help="Table 2 (Markdown, CSV), bar plot and r4_summary.csv of runs")
+    rep.add_argument("runs", nargs="+", type=Path, help="r4 evaluate output directories")
+    rep.add_argument("--out", type=Path, required=True)
+    rep.add_argument("--paper", action="store_true", help="add the paper's rows of preset models")
+    rep.add_argument("--no-plot", action="store_true")
+    rep.set_defaults(func=_report)
+
+    mod = cmds.add_parser("models", help="the paper's 15 model presets")
+    mod.set_defaults(func=_models)
+
     gal = cmds.add_parser("gallery", help="rewrite the rendering gallery (start frame of every scenario)")
     gal.add_argument("--out", type=Path, default=Path("docs/gallery"), help="output directory")
     gal.add_argument("--seed", type=int, default=0)
     gal.set_defaults(func=_gallery)
 
 
+def _vlm_options(args: argparse.Namespace) -> object | None:
+    vlm_flags = [f for f in ("base_url", "model", "api_key_env") if getattr(args, f)]
+    if args.agent != runner.VLM_AGENT:
+        if vlm_flags:
+            raise ConfigError(f"--{vlm_flags[0].replace('_', '-')}: only for --agent vlm")
+        return None
+    if not args.base_url or not args.model:
+        raise ConfigError("--agent vlm: needs --base-url and --model")
+    from drivehierarchy.agents.vlm import PayloadOptions, VLMOptions
+    from drivehierarchy.agents.vlm.transport import DecodingConfig
+
+    return VLMOptions(
+        base_url=args.base_url,
+        model=args.model,
+        api_key_env=args.api_key_env,
+        decoding=DecodingConfig(
+            temperature=args.temperature, max_tokens=args.max_tokens, repetition_penalty=None
+        ),
+        payload=PayloadOptions(blind=args.blind, no_bev=args.no_bev, corrupt=args.corrupt),
+        timeout_s=args.timeout,
+        max_retries=args.max_retries,
+        max_consecutive_transport_failures=args.max_transport_failures,
+        latency_aware=args.latency_aware,
+    )
+
+
 def _opts(args: argparse.Namespace) -> runner.RunOptions:
-    return runner.RunOptions(agent=args.agent, seed=args.seed, frames=args.frames, video=args.video)
+    return runner.RunOptions(
+        agent=args.agent,
+        seed=args.seed,
+        frames=args.frames,
+        video=args.video,
+        seeds=getattr(args, "seeds", 1),
+        jobs=getattr(args, "jobs", 1),
+        vlm=_vlm_options(args),
+        ray_address=getattr(args, "ray", None),
+        progress=args.progress or sys.stderr.isatty(),
+    )
 
 
 def _run(args: argparse.Namespace) -> int:
     path = Path(resolve_scenario(args.scenario))
-    results = runner.evaluate([path], args.out, _opts(args), log=lambda m: print(m, file=sys.stderr))
+    try:
+        results = runner.evaluate([path], args.out, _opts(args), log=lambda m: print(m, file=sys.stderr))
+    except runner.BatchAborted as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 3
     print(json.dumps(results[0]["score"], indent=2, sort_keys=True))
     return 0
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    results = runner.evaluate(runner.suite_scenarios(args.suite), args.out, _opts(args))
+    opts = _opts(args)
+    log = (lambda m: None) if opts.progress else print
+    try:
+        results = runner.evaluate(runner.suite_scenarios(args.suite), args.out, opts, log=log)
+    except runner.BatchAborted as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 3
     print()
     print(runner.summary_table(results))
+    return 0
+
+
+def _report(args: argparse.Namespace) -> int:
+    from drivehierarchy.benchmark.r4 import report
+
+    for path in report.build_report(args.runs, args.out, paper=args.paper, plot=not args.no_plot):
+        print(path)
+    return 0
+
+
+def _models(args: argparse.Namespace) -> int:
+    from drivehierarchy.agents.vlm.presets import PRESETS
+
+    print(f"{'key':<18} {'paper name':<20} {'served model id':<42} images  paper R4")
+    for p in PRESETS.values():
+        print(
+            f"{p.key:<18} {p.paper_name:<20} {p.served_model_id:<42} {p.images_per_prompt:>6}  "
+            f"{p.paper_r4_average:.3f}"
+        )
     return 0
 
 

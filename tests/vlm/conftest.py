@@ -1,0 +1,49 @@
+"""Shared pieces of the closed-loop VLM tests: a small suite and the protocol's exact texts."""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+
+from drivehierarchy.scenarios import builtin_root
+
+# The three shortest built-in scenarios with the scripted driver (50–100 decisions each).
+SHORT = ["02_obstacles", "06_traffic_flow", "09_yielding"]
+
+# PROTOCOL §2.2, verbatim: the action question appended to the condition prefix.
+ACTION_QUESTION = (
+    "Your primary objective is to reach the destination in the minimum time while remaining safe and "
+    "legal. Hard constraints: do not collide with vehicles, pedestrians, or static obstacles; do not "
+    "leave the drivable route; obey traffic lights, stop signs, and right-of-way rules. Driving policy: "
+    "do not idle, crawl, or wait without a concrete safety or rule-based reason; if the route ahead is "
+    "clear, actively increase speed toward the highest safe speed; use steering proactively to follow "
+    "the future path and begin steering before turns instead of defaulting to zero steering; slow down "
+    "only when required by route geometry, traffic rules, obstacles, or collision risk. For the steer "
+    "value, a negative value indicates left, while a positive value indicates right.When making the "
+    "decision, consider the ego speed, the future route geometry, drivable space, nearby vehicles, "
+    "pedestrians, traffic lights, traffic signs, and any immediate collision or off-road risk. Never "
+    "idle without a concrete safety or rule-based reason. Use steering proactively to track the future "
+    "path instead of defaulting to straight driving. Output only the final action decision without "
+    "explanation in the exact format:\nsteer: <float in [-1.0, 1.0]>\ntarget_speed_mps: <float in "
+    "[0.0, 30.0]>"
+)
+
+
+def short_scenarios(n: int = 3) -> list[Path]:
+    root = builtin_root() / "r4"
+    return [sorted((root / c).glob("*.toml"))[0] for c in SHORT[:n]]
+
+
+@pytest.fixture
+def suite_dir(tmp_path: Path) -> Path:
+    """A scenario folder (`--suite DIR`) holding the short scenarios, maps linked beside them."""
+    root = tmp_path / "suite"
+    (root / "r4").mkdir(parents=True)
+    os.symlink(builtin_root() / "maps", root / "maps")
+    for p in short_scenarios():
+        (root / "r4" / p.parent.name).mkdir()
+        shutil.copy(p, root / "r4" / p.parent.name / p.name)
+    return root / "r4"

@@ -1,0 +1,111 @@
+"""Against a real OpenAI-compatible implementation: `transformers serve` running a tiny Qwen2-VL
+that this test builds (random weights, its own tokenizer, no download). A couple of decisions on
+one scenario through the blocking agent, and the harness's health check and batch-abort rule
+(random weights never produce a parseable action)."""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from conftest import short_scenarios
+from drivehierarchy.agents.base import run_episode
+from drivehierarchy.agents.vlm import VLMAgent, VLMOptions
+from drivehierarchy.agents.vlm.transport import DecodingConfig
+from drivehierarchy.benchmark.r4 import runner
+from drivehierarchy.envs.r4 import DriveHierarchyR4Env
+
+pytestmark = pytest.mark.serving
+
+pytest.importorskip("fastapi")
+pytest.importorskip("uvicorn")
+pytest.importorskip("torchvision")  # the Qwen2-VL processor's video half needs it
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="module")
+def served(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, str]]:
+    from tiny_qwen2vl import build
+
+    model_dir = str(build(tmp_path_factory.mktemp("tiny_qwen2vl") / "model"))
+    port = _free_port()
+    log = tmp_path_factory.mktemp("serve") / "serve.log"
+    env = {**os.environ, "HF_HUB_OFFLINE": "1", "TRANSFORMERS_OFFLINE": "1"}
+    with log.open("w") as fh:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "transformers.cli.transformers", "serve", model_dir,
+             "--device", "cpu", "--host", "127.0.0.1", "--port", str(port)],
+            stdout=fh, stderr=subprocess.STDOUT, env=env,
+        )  # fmt: skip
+    url = f"http://127.0.0.1:{port}/v1"
+    try:
+        deadline = time.monotonic() + 240
+        while True:
+            try:
+                with urllib.request.urlopen(f"{url}/models", timeout=2) as r:
+                    ids = [m["id"] for m in json.load(r)["data"]]
+                break
+            except OSError:
+                if proc.poll() is not None or time.monotonic() > deadline:
+                    pytest.fail(f"transformers serve did not start:\n{log.read_text()[-3000:]}")
+                time.sleep(0.5)
+        assert ids == [model_dir]
+        yield url, model_dir
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def test_a_couple_of_decisions_through_a_real_server(served: tuple[str, str]) -> None:
+    url, model = served
+    opts = VLMOptions(
+        base_url=url, model=model, decoding=DecodingConfig(max_tokens=8, repetition_penalty=None)
+    )
+    agent = VLMAgent(opts)
+    env = DriveHierarchyR4Env(scenario=short_scenarios(1)[0])
+    try:
+        t0 = time.perf_counter()
+        run_episode(env, agent, seed=0, max_steps=3)
+        wall = time.perf_counter() - t0
+    finally:
+        agent.close()
+    assert [d["decision"] for d in agent.log] == [1, 2, 3]
+    assert all(d["transport_error"] is None and isinstance(d["raw"], str) for d in agent.log)
+    log = env.unwrapped.sim.decision_log()
+    assert [d["raw"] for d in log] == [d["raw"] for d in agent.log]
+    for d in log:  # random weights: whatever came back went through the Rust parser
+        assert (d["parsed"] is None) == (d["failure"] is not None)
+    assert wall < 60
+
+
+def test_harness_health_check_and_batch_abort_against_a_real_server(
+    served: tuple[str, str], tmp_path: Path
+) -> None:
+    url, model = served
+    vlm = VLMOptions(
+        base_url=url, model=model, decoding=DecodingConfig(max_tokens=8, repetition_penalty=None)
+    )
+    opts = runner.RunOptions(agent="vlm", vlm=vlm)
+    with pytest.raises(runner.BatchAborted, match="no_valid_decision"):
+        runner.evaluate(short_scenarios(1), tmp_path / "run", opts, log=print)
+    (line,) = [json.loads(x) for x in (tmp_path / "run" / "aborted.jsonl").read_text().splitlines()]
+    assert line["vlm"]["transport_errors"] == 0 and line["vlm"]["decisions"] > 0
+    assert line["vlm"]["parse_failures"] == line["vlm"]["decisions"]

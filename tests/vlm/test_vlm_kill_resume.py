@@ -1,0 +1,94 @@
+"""`kill -9` during `r4 evaluate --agent vlm`, then the same command again: finished scenarios are
+not redone, nothing is lost or duplicated, and the summary equals an uninterrupted run's.
+Real processes: the loopback server and the CLI run as subprocesses."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture
+def server_url() -> Iterator[str]:
+    port = _free_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "drivehierarchy.testing.openai_server", "--port", str(port), "--driver",
+         "--latency-ms", "5"],
+        stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert proc.stderr is not None
+        assert "serving" in proc.stderr.readline()
+        yield f"http://127.0.0.1:{port}/v1"
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def _cmd(url: str, suite: Path, out: Path) -> list[str]:
+    return [sys.executable, "-m", "drivehierarchy.cli", "r4", "evaluate", "--agent", "vlm",
+            "--base-url", url, "--model", "test-model", "--suite", str(suite), "--out", str(out),
+            "--jobs", "2"]  # fmt: skip
+
+
+def _keys(out: Path) -> list[str]:
+    path = out / "results.jsonl"
+    if not path.exists():
+        return []
+    keys = []
+    for line in path.read_text().splitlines():
+        with contextlib.suppress(json.JSONDecodeError):  # a line torn by the kill
+            keys.append(json.loads(line)["key"])
+    return keys
+
+
+def test_kill_9_then_rerun_equals_an_uninterrupted_run(
+    tmp_path: Path, suite_dir: Path, server_url: str
+) -> None:
+    whole = tmp_path / "whole"
+    done = subprocess.run(_cmd(server_url, suite_dir, whole), capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert len(_keys(whole)) == 3
+
+    out = tmp_path / "killed"
+    proc = subprocess.Popen(
+        _cmd(server_url, suite_dir, out), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+    )
+    deadline = time.monotonic() + 300
+    while len(_keys(out)) < 1 and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    assert proc.poll() is None, "the run finished before it could be killed"
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    before = _keys(out)
+    assert 1 <= len(before) < 3
+    mtimes = {k: (out / "scenes" / k / "scene_score.json").stat().st_mtime_ns for k in before}
+
+    again = subprocess.run(_cmd(server_url, suite_dir, out), capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stderr
+    assert again.stdout.count("done before, skipped") == len(before)
+    after = _keys(out)
+    assert after[: len(before)] == before and sorted(after) == sorted(set(after)) and len(after) == 3
+    for k, t in mtimes.items():  # finished scenarios were not redone
+        assert (out / "scenes" / k / "scene_score.json").stat().st_mtime_ns == t
+    assert json.loads((out / "summary.json").read_text()) == json.loads((whole / "summary.json").read_text())
+    for k in after:
+        assert (out / "scenes" / k / "decisions.jsonl").read_text().count("\n") == json.loads(
+            (out / "scenes" / k / "scene_score.json").read_text()
+        )["decisions"]
