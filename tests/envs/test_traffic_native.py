@@ -3,44 +3,10 @@ world's IDM model (docs/traffic.md, "Native mode"). Same behaviour checks as the
 
 from __future__ import annotations
 
-import hashlib
-import textwrap
 from pathlib import Path
 
 import numpy as np
-
-from drivehierarchy.envs.r4 import DriveHierarchyR4Env
-from drivehierarchy.scenarios import builtin_root
-
-TOWN01 = builtin_root() / "maps" / "town01" / "town01.net.xml"
-BENCH = builtin_root() / "bench" / "town01_sumo_traffic.toml"
-IS_TRAFFIC = 7  # column of actors_array
-
-
-def write_scenario(tmp_path: Path, body: str, name: str = "s.toml") -> Path:
-    head = f'version = 1\nid = "t"\ncategory = "06_traffic_flow"\nmap = "{TOWN01.as_posix()}"\n'
-    p = tmp_path / name
-    p.write_text(head + textwrap.dedent(body), encoding="utf-8")
-    return p
-
-
-def make_env(scenario: str | Path, **kw: object) -> DriveHierarchyR4Env:
-    return DriveHierarchyR4Env(scenario=scenario, front=None, bev=None, prompt=False, **kw)
-
-
-def traffic_rows(env: DriveHierarchyR4Env) -> np.ndarray:
-    a = env.sim.actors_array()
-    return a[a[:, IS_TRAFFIC] == 1.0]
-
-
-def frame(env: DriveHierarchyR4Env) -> tuple[np.ndarray, np.ndarray]:
-    ego = env.sim.ego_array()
-    rows = traffic_rows(env)
-    d = rows[:, 1:3] - ego[:2]
-    fwd = np.array([np.cos(ego[2]), np.sin(ego[2])])
-    left = np.array([-fwd[1], fwd[0]])
-    rel = np.stack([d @ fwd, d @ left], axis=1)
-    return ego, np.concatenate([rows, rel], axis=1)
+from traffic_helpers import BENCH, frame, make_env, run_expert, traffic_rows, write_scenario
 
 
 def test_native_queues_behind_a_stopped_ego_and_never_passes_through(tmp_path: Path) -> None:
@@ -129,34 +95,8 @@ def test_native_vehicles_stop_at_red(tmp_path: Path) -> None:
         env.close()
 
 
-def run_expert(scenario: str | Path, seed: int, steps: int | None = None) -> dict[str, object]:
-    env = make_env(scenario, traffic="native")
-    try:
-        env.reset(seed=seed)
-        digest = hashlib.sha256()
-        counts = [len(traffic_rows(env))]
-        info: dict[str, object] = {}
-        n = 0
-        while steps is None or n < steps:
-            _, _, term, _, info = env.step(env.expert_action())
-            digest.update(np.ascontiguousarray(env.sim.actors_array()).tobytes())
-            counts.append(len(traffic_rows(env)))
-            n += 1
-            if term:
-                break
-        return {
-            "traffic": digest.hexdigest(),
-            "trajectory": env.sim.trajectory_hash,
-            "counts": counts,
-            "info": info,
-            "score": env.score(),
-        }
-    finally:
-        env.close()
-
-
 def test_native_fifty_vehicles_expert_reaches_destination_without_collision() -> None:
-    out = run_expert(BENCH, seed=0)
+    out = run_expert(BENCH, seed=0, traffic="native")
     counts = out["counts"]
     assert isinstance(counts, list) and counts[0] >= 50, counts[:3]
     info = out["info"]
@@ -166,9 +106,9 @@ def test_native_fifty_vehicles_expert_reaches_destination_without_collision() ->
 
 
 def test_native_traffic_is_deterministic() -> None:
-    a = run_expert(BENCH, seed=5, steps=60)
-    b = run_expert(BENCH, seed=5, steps=60)
-    c = run_expert(BENCH, seed=6, steps=60)
+    a = run_expert(BENCH, seed=5, steps=60, traffic="native")
+    b = run_expert(BENCH, seed=5, steps=60, traffic="native")
+    c = run_expert(BENCH, seed=6, steps=60, traffic="native")
     assert a["traffic"] == b["traffic"] and a["trajectory"] == b["trajectory"]
     assert a["traffic"] != c["traffic"]
     env = make_env(BENCH, traffic="native")

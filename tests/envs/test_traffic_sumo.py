@@ -6,11 +6,9 @@ town01 network (or the suite's Ingolstadt net) and drives the real Rust world.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import subprocess
 import sys
-import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -18,43 +16,13 @@ import pytest
 
 pytest.importorskip("libsumo")
 
+from traffic_helpers import BENCH, frame, make_env, run_expert, traffic_rows, write_scenario
+
 from drivehierarchy import _core
 from drivehierarchy._core import ConfigError, ScenarioError, SimulationError
-from drivehierarchy.envs.r4 import DriveHierarchyR4Env
-from drivehierarchy.scenarios import builtin_root, sumo_home
+from drivehierarchy.scenarios import sumo_home
 
-TOWN01 = builtin_root() / "maps" / "town01" / "town01.net.xml"
-BENCH = builtin_root() / "bench" / "town01_sumo_traffic.toml"
 FLOW_SCENARIO = "06_traffic_flow/ingolstadt_westbound_flow"
-IS_TRAFFIC = 7  # column of actors_array
-
-
-def write_scenario(tmp_path: Path, body: str, name: str = "s.toml") -> Path:
-    head = f'version = 1\nid = "t"\ncategory = "06_traffic_flow"\nmap = "{TOWN01.as_posix()}"\n'
-    p = tmp_path / name
-    p.write_text(head + textwrap.dedent(body), encoding="utf-8")
-    return p
-
-
-def make_env(scenario: str | Path, **kw: object) -> DriveHierarchyR4Env:
-    return DriveHierarchyR4Env(scenario=scenario, front=None, bev=None, prompt=False, **kw)
-
-
-def traffic_rows(env: DriveHierarchyR4Env) -> np.ndarray:
-    a = env.sim.actors_array()
-    return a[a[:, IS_TRAFFIC] == 1.0]
-
-
-def frame(env: DriveHierarchyR4Env) -> tuple[np.ndarray, np.ndarray]:
-    """Ego pose and traffic rows (ego frame: forward, left) of the current tick."""
-    ego = env.sim.ego_array()
-    rows = traffic_rows(env)
-    d = rows[:, 1:3] - ego[:2]
-    fwd = np.array([np.cos(ego[2]), np.sin(ego[2])])
-    left = np.array([-fwd[1], fwd[0]])
-    rel = np.stack([d @ fwd, d @ left], axis=1)
-    return ego, np.concatenate([rows, rel], axis=1)
-
 
 # -- the [traffic] table ---------------------------------------------------------------------------
 
@@ -246,32 +214,6 @@ def test_sumo_vehicles_stop_at_a_red_sumo_switches(tmp_path: Path) -> None:
         env.close()
 
 
-def run_expert(scenario: str | Path, seed: int, steps: int | None = None) -> dict[str, object]:
-    env = make_env(scenario)
-    try:
-        env.reset(seed=seed)
-        digest = hashlib.sha256()
-        counts = [len(traffic_rows(env))]
-        info: dict[str, object] = {}
-        n = 0
-        while steps is None or n < steps:
-            _, _, term, _, info = env.step(env.expert_action())
-            digest.update(np.ascontiguousarray(env.sim.actors_array()).tobytes())
-            counts.append(len(traffic_rows(env)))
-            n += 1
-            if term:
-                break
-        return {
-            "traffic": digest.hexdigest(),
-            "trajectory": env.sim.trajectory_hash,
-            "counts": counts,
-            "info": info,
-            "score": env.score(),
-        }
-    finally:
-        env.close()
-
-
 def test_fifty_vehicles_expert_reaches_destination_without_collision() -> None:
     out = run_expert(BENCH, seed=0)
     counts = out["counts"]
@@ -289,7 +231,7 @@ def test_sumo_traffic_is_deterministic_across_runs_and_processes() -> None:
     assert a["traffic"] == b["traffic"] and a["trajectory"] == b["trajectory"]
     assert a["traffic"] != c["traffic"]
     code = (
-        "import json, sys; sys.path.insert(0, sys.argv[1]); import test_traffic_sumo as t; "
+        "import json, sys; sys.path.insert(0, sys.argv[1]); import traffic_helpers as t; "
         "r = t.run_expert(t.BENCH, seed=5, steps=60); print(json.dumps([r['traffic'], r['trajectory']]))"
     )
     res = subprocess.run(
