@@ -12,6 +12,7 @@ import tomllib
 from drivehierarchy import DriveHierarchyError, _core
 from drivehierarchy._core import ConfigError
 from drivehierarchy.scenarios import builtin_scenarios, resolve_scenario, scenario_id, sumo_home
+from drivehierarchy.suite_probe import POLICIES
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -36,6 +37,27 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     pv.add_argument("--out", type=Path, default=Path("."), help="output folder (default: .)")
     pv.add_argument("--seed", type=int, default=0)
     pv.set_defaults(func=_preview)
+
+    pr = cmds.add_parser(
+        "probe",
+        help="run the expert, zero, constant-8 m/s and hazard-blind follower policies over scenarios",
+        description=(
+            "Measures how discriminating a suite is: S_R4 of four reference policies per scenario "
+            "and per category (state-only episodes in worker processes). Writes OUT/probe.md, "
+            "probe.csv and probe_summary.json; exit 2 when no scenario is found."
+        ),
+    )
+    pr.add_argument("files", nargs="+", help="scenario files or folders (every */*.toml and *.toml)")
+    pr.add_argument("--out", type=Path, required=True, help="output folder")
+    pr.add_argument(
+        "--policies", default=",".join(POLICIES), help="comma-separated subset of " + ",".join(POLICIES)
+    )
+    pr.add_argument("--seed", type=int, default=0)
+    pr.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    pr.add_argument(
+        "--traffic", choices=["sumo", "native", "none"], help="override every scenario's traffic mode"
+    )
+    pr.set_defaults(func=_probe)
 
     im = cmds.add_parser(
         "import-official",
@@ -86,6 +108,20 @@ def _validate(args: argparse.Namespace) -> int:
             continue
         print(f"ok {f}: {json.dumps(summary, sort_keys=True)}")
     return 1 if bad else 0
+
+
+def _probe(args: argparse.Namespace) -> int:
+    from drivehierarchy import suite_probe
+
+    policies = tuple(p.strip() for p in args.policies.split(",") if p.strip())
+    unknown = [p for p in policies if p not in POLICIES]
+    if unknown or not policies:
+        raise ConfigError(f"--policies {args.policies!r}: expected a subset of {','.join(POLICIES)}")
+    files = _expand(args.files)
+    rows = suite_probe.probe(files, policies, seed=args.seed, jobs=args.jobs, traffic=args.traffic)
+    summary = suite_probe.write_outputs(rows, args.out)
+    print(suite_probe.markdown(rows, summary).split("\n\n")[0])
+    return 0
 
 
 def _toml(path: Path) -> dict[str, Any]:
