@@ -54,7 +54,8 @@ fn build(include: &Path, lib: &Path) -> Result<(), String> {
     let out_dir = PathBuf::from(std::env::var("OUT_DIR").map_err(|e| e.to_string())?);
     let built = out_dir.join(SHIM);
     // `cc` picks the C++ compiler (CXX, target flags); we link a shared object ourselves.
-    let compiler = cc::Build::new().cpp(true).cargo_metadata(false).try_get_compiler().map_err(|e| e.to_string())?;
+    let compiler =
+        cc::Build::new().cpp(true).cargo_metadata(false).try_get_compiler().map_err(|e| e.to_string())?;
     let mut cmd = compiler.to_command();
     cmd.args(["-std=c++17", "-O2", "-fPIC", "-shared", "-fvisibility=hidden", "-fvisibility-inlines-hidden"])
         .arg("-I")
@@ -74,6 +75,8 @@ fn build(include: &Path, lib: &Path) -> Result<(), String> {
     }
     let dest = Path::new("drivehierarchy").join(SHIM);
     let tmp = Path::new("drivehierarchy").join(format!("{SHIM}.tmp"));
-    std::fs::copy(&built, &tmp).and_then(|_| std::fs::rename(&tmp, &dest)).map_err(|e| format!("{}: {e}", dest.display()))?;
+    std::fs::copy(&built, &tmp)
+        .and_then(|_| std::fs::rename(&tmp, &dest))
+        .map_err(|e| format!("{}: {e}", dest.display()))?;
     Ok(())
 }

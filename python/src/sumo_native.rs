@@ -15,8 +15,8 @@ use crate::traffic::{Mover, Static, SumoSync};
 use dh_env::scenario::ResolvedScenario;
 use dh_env::world::{TrafficFrame, TrafficInput, TrafficModel};
 use dh_env::{Error, Result};
-use pyo3::prelude::*;
 use libloading::os::unix::{Library, RTLD_LOCAL, RTLD_NOW};
+use pyo3::prelude::*;
 use std::collections::{BTreeSet, HashMap};
 use std::ffi::{c_char, c_int, CStr, CString};
 use std::path::{Path, PathBuf};
@@ -42,7 +42,7 @@ struct RawVehicle {
 }
 
 #[repr(C)]
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Default)]
 struct RawNew {
     key: u64,
     length: f64,
@@ -50,12 +50,6 @@ struct RawNew {
     height: f64,
     color: [i32; 4],
     vclass: [c_char; 32],
-}
-
-impl Default for RawNew {
-    fn default() -> RawNew {
-        RawNew { key: 0, length: 0.0, width: 0.0, height: 0.0, color: [0; 4], vclass: [0; 32] }
-    }
 }
 
 /// The shim's entry points (see the C++ file for what each does).
@@ -174,7 +168,10 @@ impl Api {
     }
 
     fn start(&self, args: &[String]) -> std::result::Result<(), String> {
-        let owned: Vec<CString> = args.iter().map(|a| CString::new(a.as_str()).map_err(|e| e.to_string())).collect::<std::result::Result<_, _>>()?;
+        let owned: Vec<CString> = args
+            .iter()
+            .map(|a| CString::new(a.as_str()).map_err(|e| e.to_string()))
+            .collect::<std::result::Result<_, _>>()?;
         let ptrs: Vec<*const c_char> = owned.iter().map(|c| c.as_ptr()).collect();
         if unsafe { (self.start)(ptrs.as_ptr(), ptrs.len() as i32) } == 0 {
             Ok(())
@@ -391,7 +388,8 @@ impl NativeSession {
                 self.api.add(&vid, EGO_ROUTE, &vid)?;
                 self.mirrors.insert(m.0);
             }
-            let vid = self.mirror_ids.entry(m.0).or_insert_with(|| CString::new(mirror_id(m.0)).expect("no NUL"));
+            let vid =
+                self.mirror_ids.entry(m.0).or_insert_with(|| CString::new(mirror_id(m.0)).expect("no NUL"));
             self.api.move_to(vid, m)?;
         }
         Ok(())
@@ -399,7 +397,9 @@ impl NativeSession {
 
     fn step(&mut self, movers: &[Mover]) -> Result<()> {
         if !self.running {
-            return Err(Error::Simulation("SUMO is not running (the traffic was closed); call reset()".into()));
+            return Err(Error::Simulation(
+                "SUMO is not running (the traffic was closed); call reset()".into(),
+            ));
         }
         self.move_all(movers)?;
         self.api.step()?;
@@ -454,7 +454,7 @@ impl NativeSumoBridge {
     fn read(&mut self, api: &Api, out: &mut TrafficFrame) -> Result<()> {
         api.take_new(&mut self.raw_new);
         for n in &self.raw_new {
-            // SAFETY of the read: the shim NUL-terminates `vclass` within its 32 bytes.
+            // The shim NUL-terminates `vclass` within its 32 bytes.
             let vclass: Vec<u8> = n.vclass.iter().take_while(|&&c| c != 0).map(|&c| c as u8).collect();
             let vclass = String::from_utf8_lossy(&vclass);
             let color = n.color.map(i64::from);
@@ -537,9 +537,15 @@ impl PyNativeSumo {
     /// they cannot load.
     #[new]
     #[pyo3(signature = (shim, libsumocpp, sumo_binary, extra_args=Vec::new()))]
-    fn new(shim: PathBuf, libsumocpp: PathBuf, sumo_binary: PathBuf, extra_args: Vec<String>) -> PyResult<Self> {
-        let session = NativeSession::new(&shim, &libsumocpp, sumo_binary, extra_args)
-            .map_err(|e| crate::errors::SimulationError::new_err(format!("native SUMO backend unavailable: {e}")))?;
+    fn new(
+        shim: PathBuf,
+        libsumocpp: PathBuf,
+        sumo_binary: PathBuf,
+        extra_args: Vec<String>,
+    ) -> PyResult<Self> {
+        let session = NativeSession::new(&shim, &libsumocpp, sumo_binary, extra_args).map_err(|e| {
+            crate::errors::SimulationError::new_err(format!("native SUMO backend unavailable: {e}"))
+        })?;
         Ok(PyNativeSumo { session: Arc::new(Mutex::new(session)) })
     }
 
