@@ -9,15 +9,16 @@ python3 -m pip install --upgrade "pip>=23" "maturin>=1.7,<2" >/dev/null
 sumo_pin="$(grep -o '"eclipse-sumo==[^"]*"' pyproject.toml | tr -d '"')"
 python3 -m pip install "$sumo_pin"
 SUMO_HOME="$(python3 -c 'import sumo; print(sumo.SUMO_HOME)')"
-# SUMO's libraries (libsumocpp, like the libsumo module) need a few system libraries (X11, GL)
-# that a minimal Debian/Ubuntu image may lack.
+# The shim needs a C++ compiler, and SUMO's libraries (libsumocpp, like the libsumo module) a few
+# system libraries (X11, GL) that a minimal Debian/Ubuntu image may lack.
 missing="$(ldd "$SUMO_HOME/lib64/libsumocpp.so" | awk '/not found/ {print $1}' || true)"
+command -v c++ >/dev/null || missing="$missing c++"
 if [ -n "$missing" ]; then
-    echo "libsumocpp needs missing system libraries: $missing" >&2
+    echo "the native SUMO backend needs:$missing" >&2
     if command -v apt-get >/dev/null; then
         sudo=""; [ "$(id -u)" -ne 0 ] && sudo="sudo"
         $sudo apt-get update -qq
-        $sudo apt-get install -y -qq libx11-6 libxext6 libxrender1 libgl1 libxcb1 libexpat1 zlib1g
+        $sudo apt-get install -y -qq g++ libx11-6 libxext6 libxrender1 libgl1 libxcb1 libexpat1 zlib1g
     fi
 fi
 SUMO_HOME="$SUMO_HOME" python3 -m pip install -e ".[all]"
