@@ -22,7 +22,7 @@ from drivehierarchy import _core
 from drivehierarchy._core import ConfigError, ScenarioError, SimulationError
 from drivehierarchy.scenarios import sumo_home
 
-FLOW_SCENARIO = "06_traffic_flow/ingolstadt_westbound_flow"
+FLOW_SCENARIO = "06_traffic_flow/ingolstadt_06_westbound_flow"
 
 # -- the [traffic] table ---------------------------------------------------------------------------
 
