@@ -107,8 +107,9 @@ def worker_no_sumo(scenario: str, repeat: int) -> dict[str, Any]:
         "warm_ms": statistics.median(sum(w) for w in warm),
         "warm_construct_ms": warm_construct,
         "parse_ms": parse,
-        # The first env of a process pays more than the map: Python and Rust set-up on first use.
-        "init_ms": cold[0] - warm_construct - parse,
+        # The first env of a process pays more than the map (construct or first reset): set-up on
+        # first use in Python and Rust.
+        "init_ms": sum(cold) - statistics.median(sum(w) for w in warm) - parse,
     }
 
 
@@ -252,9 +253,28 @@ def main() -> None:
         sumo = {}
         if not args.no_sumo:
             sumo = {f: pool.submit(worker_sumo, str(f), args.repeat) for f in files if info[f][1] == "sumo"}
-        res_plain = {f: fu.result() for f, fu in plain.items()}
-        res_sumo = {f: fu.result() for f, fu in sumo.items()}
+        failed: dict[Path, str] = {}
+
+        def collect(futures: dict[Path, Any], what: str) -> dict[Path, dict[str, Any]]:
+            out = {}
+            for f, fu in futures.items():
+                try:
+                    out[f] = fu.result()
+                except Exception as exc:  # a scenario that does not load is reported, not timed
+                    failed[f] = f"{what}: {type(exc).__name__}: {exc}"
+            return out
+
+        res_plain = collect(plain, "no SUMO")
+        res_sumo = collect(sumo, "SUMO")
         peer = peer_f.result()
+    if failed:
+        print("could not time (left out below):", file=sys.stderr)
+        for f, msg in failed.items():
+            print(f"  {f}: {msg}", file=sys.stderr)
+        files = [f for f in files if f in res_plain]
+        res_sumo = {f: r for f, r in res_sumo.items() if f in res_plain}
+        if not files:
+            raise SystemExit("no scenario could be timed")
 
     root = files[0].parent.parent if len(files) > 1 else files[0].parent
     print(f"{len(files)} scenarios under {root}; times in ms (wall), warm = median of {args.repeat}\n")
