@@ -109,9 +109,9 @@ class SumoTraffic:
         routes = self._tmp / "traffic.rou.xml"
         routes.write_text(routes_xml, encoding="utf-8")
         errlog = self._tmp / "sumo_errors.log"
-        from sumo import SUMO_HOME
+        from drivehierarchy.scenarios import sumo_runtime_home
 
-        binary = str(Path(SUMO_HOME) / "bin" / "sumo")
+        binary = str(Path(sumo_runtime_home()) / "bin" / "sumo")
         cmd = [
             binary,
             "--net-file", net,
