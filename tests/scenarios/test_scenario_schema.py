@@ -1,9 +1,10 @@
-"""The scenario JSON Schema (generated from the Rust types)."""
+"""The scenario JSON Schema (generated from the Rust types) and `scenario validate`'s locations."""
 
 from __future__ import annotations
 
 import copy
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -11,7 +12,7 @@ import jsonschema
 import pytest
 import tomllib
 
-from drivehierarchy import _core
+from drivehierarchy import ScenarioError, _core
 from drivehierarchy.cli import main
 from drivehierarchy.scenarios import builtin_root
 
@@ -145,3 +146,39 @@ def test_schema_rejects_what_the_reader_rejects(
     errs = errors(schema, doc)
     assert errs, "the schema must reject this"
     assert any(e.startswith(mention) for e in errs), errs
+
+
+def _broken_copy(tmp_path: Path, old: str, new: str) -> Path:
+    text = SCEN.read_text(encoding="utf-8").replace(
+        '"../../maps/', f'"{(builtin_root() / "maps").as_posix()}/'
+    )
+    assert old in text
+    p = tmp_path / "broken.toml"
+    p.write_text(text.replace(old, new), encoding="utf-8")
+    return p
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "where", "field"),
+    [
+        # Semantic errors found against the map: unknown lane, s past the lane's end.
+        ('lanes = ["C2T_2", "T2E_1"]', 'lanes = ["C2T_2", "T2E_9"]', "26:29", "actors[1].route.lanes[1]"),
+        (
+            'destination = { lane = "C2T_1", s = 330.0 }',
+            'destination = { lane = "C2T_1", s = 3300.0 }',
+            "11:37",
+            "ego.destination.s",
+        ),
+        # A type error, found while reading.
+        ("speed_mps = 9.0\naccel", 'speed_mps = "fast"\naccel', "18:13", "actors[0].speed_mps"),
+    ],
+)
+def test_validate_cli_reports_file_line_and_field(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], old: str, new: str, where: str, field: str
+) -> None:
+    p = _broken_copy(tmp_path, old, new)
+    assert main(["scenario", "validate", str(p)]) == 1
+    out = capsys.readouterr().out
+    assert f"INVALID {p}:{where}: field `{field}` = " in out, out
+    with pytest.raises(ScenarioError, match=re.escape(f"{p}:{where}: field `{field}`")):
+        _core.validate_scenario(str(p))

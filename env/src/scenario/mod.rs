@@ -35,8 +35,10 @@ impl Scenario {
 
     pub fn load_with(path: impl AsRef<Path>, opts: &LoadOptions) -> Result<ResolvedScenario> {
         let path = path.as_ref();
-        let spec = parse_scenario_file(path)?;
-        resolve::resolve(path, &spec, opts)
+        let text = parse::read_scenario_text(path)?;
+        let spec = parse_scenario_str(path, &text)?;
+        // Resolution errors name a TOML path; add where it is written in the file.
+        resolve::resolve(path, &spec, opts).map_err(|e| parse::locate(e, path, &text))
     }
 }
 
