@@ -47,7 +47,7 @@ fn located(tag: &str, edit: impl Fn(String) -> String) -> ((usize, usize), Strin
 /// syntax and type errors do. Line numbers refer to `world_fixtures/cross.toml`.
 #[test]
 fn resolution_errors_have_line_and_column() {
-    let cases: [(&str, &str, &str, (usize, usize), &str); 8] = [
+    let cases = [
         // The value itself: the unknown lane in a lane list.
         (
             "lanes = [\"W_in_0\", \"C_E_0\"]",

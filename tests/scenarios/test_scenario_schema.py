@@ -116,6 +116,9 @@ def _edits() -> list[tuple[str, Any, str]]:
     def bad_flow(d: dict[str, Any]) -> None:
         d["traffic"] = {"flows": [{"from": "a", "to": "b", "vehs_per_hour": 5, "probability": 0.1}]}
 
+    def bad_lane_name(d: dict[str, Any]) -> None:
+        d["traffic"] = {"vehicles": [{"route": ["C2T"], "depart_lane": "leftmost"}]}
+
     return [
         ("unknown top-level key", unknown_top, ": Additional properties are not allowed ('colour'"),
         ("unknown nested key", unknown_nested, "actors.0.brake: Additional properties"),
@@ -131,6 +134,7 @@ def _edits() -> list[tuple[str, Any, str]]:
         ("version", bad_version, "version: 1 was expected"),
         ("colour component", bad_color, "actors.0.color.0: 300 is greater"),
         ("flow rate twice", bad_flow, "traffic.flows.0: "),
+        ("depart_lane name", bad_lane_name, "traffic.vehicles.0.depart_lane: "),
     ]
 
 

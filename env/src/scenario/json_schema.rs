@@ -124,15 +124,30 @@ pub(crate) fn trigger_alternatives(schema: &mut Schema) {
     );
 }
 
-/// `of` of a distance trigger: the only name is `"actor_self"`.
-pub(crate) fn of_alternatives(schema: &mut Schema) {
+/// Restricts the string alternative of an untagged enum to `names`.
+fn string_names(schema: &mut Schema, names: &[&str]) {
     if let Some(Value::Array(alts)) = obj(schema).get_mut("anyOf") {
         for a in alts.iter_mut() {
             if a.get("type") == Some(&json!("string")) {
-                a["const"] = json!("actor_self");
+                a["enum"] = json!(names);
             }
         }
     }
+}
+
+/// `of` of a distance trigger: the only name is `"actor_self"`.
+pub(crate) fn of_alternatives(schema: &mut Schema) {
+    string_names(schema, &["actor_self"]);
+}
+
+/// `depart_lane`: an index or one of SUMO's names.
+pub(crate) fn lane_names(schema: &mut Schema) {
+    string_names(schema, &super::traffic::LANE_NAMES);
+}
+
+/// `depart_speed`: m/s or one of SUMO's names.
+pub(crate) fn speed_names(schema: &mut Schema) {
+    string_names(schema, &super::traffic::SPEED_NAMES);
 }
 
 /// Braking: exactly one of `at_s` and `after_s`.
@@ -203,5 +218,15 @@ mod tests {
         assert_eq!(s["definitions"]["TrafficSpec"]["additionalProperties"], json!(false));
         assert!(!scenario_json_schema_string().contains("\"null\""), "TOML has no null");
         assert_eq!(s["properties"]["version"]["const"], json!(SCENARIO_VERSION));
+    }
+
+    #[test]
+    fn committed_schema_is_current() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/scenario.schema.json");
+        let committed = std::fs::read_to_string(&path).unwrap_or_default();
+        assert!(
+            committed == scenario_json_schema_string(),
+            "docs/scenario.schema.json is stale: `drivehierarchy scenario schema --out docs/scenario.schema.json`"
+        );
     }
 }

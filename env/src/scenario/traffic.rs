@@ -62,6 +62,7 @@ impl TrafficMode {
 /// `depart_lane`: a lane index or one of SUMO's names.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(untagged)]
+#[schemars(transform = crate::scenario::json_schema::lane_names)]
 pub enum LaneChoice {
     Index(u32),
     Named(String),
@@ -70,13 +71,14 @@ pub enum LaneChoice {
 /// `depart_speed`: m/s or one of SUMO's names.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(untagged)]
+#[schemars(transform = crate::scenario::json_schema::speed_names)]
 pub enum SpeedChoice {
     Value(f64),
     Named(String),
 }
 
-const LANE_NAMES: [&str; 4] = ["best", "random", "free", "first"];
-const SPEED_NAMES: [&str; 3] = ["max", "desired", "random"];
+pub(crate) const LANE_NAMES: [&str; 4] = ["best", "random", "free", "first"];
+pub(crate) const SPEED_NAMES: [&str; 3] = ["max", "desired", "random"];
 
 /// The `[traffic]` table as written.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
