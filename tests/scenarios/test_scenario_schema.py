@@ -18,9 +18,12 @@ from drivehierarchy.scenarios import builtin_root
 
 REPO = Path(__file__).resolve().parents[2]
 SCHEMA_FILE = REPO / "docs" / "scenario.schema.json"
-SCENARIO_FILES = sorted((REPO / "scenarios").glob("**/*.toml")) + sorted(
-    (REPO / "env" / "tests" / "world_fixtures").glob("*.toml")
-)
+# Every scenario file shipped (scenarios/maps/ holds netconvert build settings, not scenarios).
+SCENARIO_FILES = [
+    p
+    for p in sorted((REPO / "scenarios").glob("**/*.toml"))
+    if p.relative_to(REPO / "scenarios").parts[0] != "maps"
+] + sorted((REPO / "env" / "tests" / "world_fixtures").glob("*.toml"))
 SCEN = builtin_root() / "r4" / "07_sudden_brake" / "town01_lead_brakes.toml"
 
 
