@@ -25,7 +25,7 @@ from drivehierarchy._core import ConfigError, ScenarioError, SimulationError
 from drivehierarchy.envs.traffic import SumoTraffic, native
 from drivehierarchy.scenarios import builtin_root, sumo_home
 
-FLOW_SCENARIO = "06_traffic_flow/ingolstadt_westbound_flow"
+FLOW_SCENARIO = "06_traffic_flow/ingolstadt_06_westbound_flow"
 
 
 @pytest.fixture(params=["native", "python"])

@@ -4,10 +4,13 @@ sources and nets cannot drift apart; `scenarios/maps/build.py` is the one rebuil
 from __future__ import annotations
 
 import importlib.util
+import json
 import sys
 from pathlib import Path
 
 import pytest
+
+from drivehierarchy import _core
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 BUILD_PY = REPO_ROOT / "scenarios" / "maps" / "build.py"
@@ -72,3 +75,41 @@ def test_bad_table_and_unknown_map_name_the_field(tmp_path: Path) -> None:
         build.load_table(bad)
     with pytest.raises(build.BuildError, match="unknown map"):
         build.select(MAPS, ["town99"])
+
+
+# town02's routes per scenario category (scenarios/maps/README.md): our reader loads the net and
+# routes each of them with the edges the README promises, over a plausible length.
+TOWN02_ROUTES = [
+    (["JW2MA", "MA2MB", "MB2MD", "MD2MX", "MX2ME"], None, 400.0, 1300.0),  # on-ramp merge
+    (["MD2MX", "MX2X", "X2AE"], None, 500.0, 1000.0),  # off-ramp, right at X
+    (["W2JW", "JW2MA"], None, 300.0, 600.0),  # left onto the ramp
+    (["Z2RN", "rb_nw", "RW2AW"], "Z2RN_1", 150.0, 260.0),  # roundabout, first exit
+    (["Z2RN", "RS2AS"], "Z2RN_2", 180.0, 320.0),  # second exit (inner lane)
+    (["AW2RW", "RN2Z"], "AW2RW_2", 200.0, 360.0),  # third exit
+    (["AE2RE", "RN2Z"], "AE2RE_0", 120.0, 260.0),  # one-lane east arm
+    (["JE2J", "J2Z"], "JE2J_2", 180.0, 260.0),  # signalised T, left turn
+    (["JW2J", "J2JE"], "JW2J_2", 330.0, 420.0),  # signalised T, straight
+    (["AE2X"], None, 440.0, 470.0),  # winding road
+]
+
+
+@pytest.mark.parametrize(
+    ("edges", "lane", "lo", "hi"), TOWN02_ROUTES, ids=[r[0][0] + "-" + r[0][-1] for r in TOWN02_ROUTES]
+)
+def test_town02_routes_load_in_our_reader(
+    tmp_path: Path, edges: list[str], lane: str | None, lo: float, hi: float
+) -> None:
+    net = MAPS["town02"].net
+    start = f'start = {{ lane = "{lane}", s = 1.0 }}\n' if lane else ""
+    scen = tmp_path / "s.toml"
+    scen.write_text(
+        f'version = 1\nid = "t"\ncategory = "08_merging"\nmap = "{net.as_posix()}"\n\n'
+        f"[ego]\n{start}route_edges = {json.dumps(edges)}\n",
+        encoding="utf-8",
+    )
+    summary = json.loads(_core.validate_scenario(str(scen), None))
+    route = summary["route_edges"]
+    assert route[0] == edges[0] and route[-1] == edges[-1]
+    assert all(e in route for e in edges), route
+    assert lo <= summary["route_length_m"] <= hi, summary["route_length_m"]
+    assert summary["traffic_lights"] >= 1  # the light J
