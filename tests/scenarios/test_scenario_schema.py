@@ -24,7 +24,29 @@ SCENARIO_FILES = [
     for p in sorted((REPO / "scenarios").glob("**/*.toml"))
     if p.relative_to(REPO / "scenarios").parts[0] != "maps"
 ] + sorted((REPO / "env" / "tests" / "world_fixtures").glob("*.toml"))
-SCEN = builtin_root() / "r4" / "07_sudden_brake" / "town01_lead_brakes.toml"
+TOWN01 = builtin_root() / "maps" / "town01" / "town01.net.xml"
+# A valid scenario of its own (line numbers below refer to it), independent of the shipped suite.
+BASE = f"""version = 1
+id = "schema_test"
+category = "07_sudden_brake"
+map = "{TOWN01.as_posix()}"
+
+[ego]
+start = {{ lane = "C2T_1", s = 20.0 }}
+destination = {{ lane = "C2T_1", s = 330.0 }}
+speed_mps = 6.0
+
+[[actors]]
+kind = "car"
+route = {{ lanes = ["C2T_1", "T2E_0"], start_s = 55.0 }}
+speed_mps = 9.0
+brake = {{ at_s = 110.0, decel_mps2 = 7.0, hold_s = 1.0 }}
+
+[[actors]]
+kind = "car"
+route = {{ lanes = ["C2T_2", "T2E_1"], start_s = 40.0 }}
+speed_mps = 9.0
+"""
 
 
 @pytest.fixture(scope="module")
@@ -71,7 +93,7 @@ def test_schema_carries_descriptions_and_defaults(schema: dict[str, Any]) -> Non
 
 
 def _base() -> dict[str, Any]:
-    return tomllib.loads(SCEN.read_text(encoding="utf-8"))
+    return tomllib.loads(BASE)
 
 
 def _edits() -> list[tuple[str, Any, str]]:
@@ -156,28 +178,28 @@ def test_schema_rejects_what_the_reader_rejects(
 
 
 def _broken_copy(tmp_path: Path, old: str, new: str) -> Path:
-    text = SCEN.read_text(encoding="utf-8").replace(
-        '"../../maps/', f'"{(builtin_root() / "maps").as_posix()}/'
-    )
-    assert old in text
+    assert old in BASE
     p = tmp_path / "broken.toml"
-    p.write_text(text.replace(old, new), encoding="utf-8")
+    p.write_text(BASE.replace(old, new), encoding="utf-8")
     return p
+
+
+def test_base_is_valid(tmp_path: Path) -> None:
+    p = tmp_path / "ok.toml"
+    p.write_text(BASE, encoding="utf-8")
+    assert main(["scenario", "validate", str(p)]) == 0
 
 
 @pytest.mark.parametrize(
     ("old", "new", "where", "field"),
     [
         # Semantic errors found against the map: unknown lane, s past the lane's end.
-        ('lanes = ["C2T_2", "T2E_1"]', 'lanes = ["C2T_2", "T2E_9"]', "26:29", "actors[1].route.lanes[1]"),
-        (
-            'destination = { lane = "C2T_1", s = 330.0 }',
-            'destination = { lane = "C2T_1", s = 3300.0 }',
-            "11:37",
-            "ego.destination.s",
-        ),
+        ('"C2T_2", "T2E_1"]', '"C2T_2", "T2E_9"]', "19:29", "actors[1].route.lanes[1]"),
+        ("s = 330.0 }", "s = 3300.0 }", "8:37", "ego.destination.s"),
+        # A key left out: the header of its table.
+        ('route = { lanes = ["C2T_2", "T2E_1"], start_s = 40.0 }\n', "", "17:1", "actors[1].waypoints"),
         # A type error, found while reading.
-        ("speed_mps = 9.0\naccel", 'speed_mps = "fast"\naccel', "18:13", "actors[0].speed_mps"),
+        ("speed_mps = 9.0\nbrake", 'speed_mps = "fast"\nbrake', "14:13", "actors[0].speed_mps"),
     ],
 )
 def test_validate_cli_reports_file_line_and_field(
