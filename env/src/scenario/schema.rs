@@ -6,6 +6,7 @@
 
 use crate::view::{ActorKind, SignKind};
 use crate::world::VehicleParams;
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// Highest schema version this build reads.
@@ -25,8 +26,9 @@ pub const CATEGORIES: [&str; 10] = [
     "10_roundabout",
 ];
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = crate::scenario::json_schema::file_constraints)]
 pub struct ScenarioFile {
     pub version: u32,
     pub id: String,
@@ -61,8 +63,9 @@ pub struct ScenarioFile {
 /// A point (and optionally a heading) either on a lane (`lane` + `s` + `offset_m`) or in
 /// network coordinates (`x`, `y`). `offset_m` > 0 is left of the lane direction;
 /// `yaw_deg` (counter-clockwise from east) overrides the lane heading.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = crate::scenario::json_schema::place_alternatives)]
 pub struct PlaceSpec {
     #[serde(default)]
     pub lane: Option<String>,
@@ -78,8 +81,9 @@ pub struct PlaceSpec {
     pub yaw_deg: Option<f64>,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = crate::scenario::json_schema::ego_alternatives)]
 pub struct EgoSpec {
     #[serde(default)]
     pub start: Option<PlaceSpec>,
@@ -97,7 +101,7 @@ pub struct EgoSpec {
     pub vehicle: Option<VehicleParams>,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ObstacleSpec {
     #[serde(default)]
@@ -114,7 +118,7 @@ pub struct ObstacleSpec {
     pub color: Option<[u8; 3]>,
 }
 
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum BehaviorSpec {
     /// Follows its path at its speeds once triggered.
@@ -124,7 +128,7 @@ pub enum BehaviorSpec {
     External,
 }
 
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum AtEndSpec {
     /// Stays at the end of its path.
@@ -135,8 +139,9 @@ pub enum AtEndSpec {
 }
 
 /// One point of a waypoint path; `speed_mps` is the speed on the leg that arrives here.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = crate::scenario::json_schema::place_alternatives)]
 pub struct WaypointSpec {
     #[serde(default)]
     pub lane: Option<String>,
@@ -154,8 +159,9 @@ pub struct WaypointSpec {
 
 /// A path along lanes: `edges` (gaps routed) or an explicit `lanes` list (junction internal
 /// lanes inserted automatically), cut to [`start_s`, `end_s`] along the route.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = crate::scenario::json_schema::route_alternatives)]
 pub struct RouteSpec {
     #[serde(default)]
     pub edges: Option<Vec<String>>,
@@ -174,8 +180,9 @@ pub struct RouteSpec {
 }
 
 /// What the `of` of a distance trigger refers to.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(untagged)]
+#[schemars(transform = crate::scenario::json_schema::of_alternatives)]
 pub enum OfSpec {
     Point([f64; 2]),
     /// Only `"actor_self"`: the actor's own start position.
@@ -184,8 +191,9 @@ pub enum OfSpec {
 }
 
 /// Start trigger: exactly one of `time_s` or `ego_within_m` (+ `of`, default `"actor_self"`).
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = crate::scenario::json_schema::trigger_alternatives)]
 pub struct TriggerSpec {
     #[serde(default)]
     pub time_s: Option<f64>,
@@ -197,8 +205,9 @@ pub struct TriggerSpec {
 
 /// A hard-braking event: once at arc length `at_s` of the path, or `after_s` seconds after the
 /// trigger, decelerate at `decel_mps2` to `to_speed_mps`; resume after `hold_s` if given.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = crate::scenario::json_schema::brake_alternatives)]
 pub struct BrakeSpec {
     #[serde(default)]
     pub at_s: Option<f64>,
@@ -211,8 +220,9 @@ pub struct BrakeSpec {
     pub hold_s: Option<f64>,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = crate::scenario::json_schema::actor_alternatives)]
 pub struct ActorSpec {
     #[serde(default)]
     pub name: Option<String>,
@@ -252,7 +262,7 @@ pub struct ActorSpec {
     pub color: Option<[u8; 3]>,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SignSpec {
     pub kind: SignKind,

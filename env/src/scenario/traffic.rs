@@ -12,6 +12,7 @@ use crate::view::ActorKind;
 use crate::{Error, Result};
 use quick_xml::events::Event;
 use quick_xml::Reader;
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -28,7 +29,7 @@ pub const SUMO_EGO_ID: &str = "dh_ego";
 pub const SUMO_EGO_ROUTE: &str = "dh_ego_route";
 
 /// Who moves the background traffic.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum TrafficMode {
     /// SUMO through libsumo, in lockstep with the world (the Python env drives it).
@@ -59,26 +60,28 @@ impl TrafficMode {
 }
 
 /// `depart_lane`: a lane index or one of SUMO's names.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(untagged)]
+#[schemars(transform = crate::scenario::json_schema::lane_names)]
 pub enum LaneChoice {
     Index(u32),
     Named(String),
 }
 
 /// `depart_speed`: m/s or one of SUMO's names.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(untagged)]
+#[schemars(transform = crate::scenario::json_schema::speed_names)]
 pub enum SpeedChoice {
     Value(f64),
     Named(String),
 }
 
-const LANE_NAMES: [&str; 4] = ["best", "random", "free", "first"];
-const SPEED_NAMES: [&str; 3] = ["max", "desired", "random"];
+pub(crate) const LANE_NAMES: [&str; 4] = ["best", "random", "free", "first"];
+pub(crate) const SPEED_NAMES: [&str; 3] = ["max", "desired", "random"];
 
 /// The `[traffic]` table as written.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct TrafficSpec {
     /// Default `sumo` when the table is present.
@@ -99,7 +102,7 @@ pub struct TrafficSpec {
     pub random: Option<RandomTripsSpec>,
 }
 
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct TrafficVehicleSpec {
     #[serde(default)]
@@ -118,8 +121,9 @@ pub struct TrafficVehicleSpec {
     pub depart_speed: Option<SpeedChoice>,
 }
 
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = crate::scenario::json_schema::flow_alternatives)]
 pub struct TrafficFlowSpec {
     #[serde(default)]
     pub id: Option<String>,
@@ -148,7 +152,7 @@ pub struct TrafficFlowSpec {
     pub depart_speed: Option<SpeedChoice>,
 }
 
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RandomTripsSpec {
     /// Vehicles per km of lane (lanes open to each type's class) at SUMO time 0.
