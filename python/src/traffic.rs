@@ -10,7 +10,7 @@
 use dh_env::geom::{Pose, Vec2};
 use dh_env::map::VClass;
 use dh_env::scenario::traffic::{kind_of_vclass, mirror_specs, MirrorSpec, TrafficDemand};
-use dh_env::scenario::{ResolvedEgo, ResolvedScenario, PALETTE};
+use dh_env::scenario::{LightProgram, ResolvedEgo, ResolvedScenario, PALETTE};
 use dh_env::view::ActorKind;
 use dh_env::world::{TrafficAgent, TrafficFrame, TrafficInput, TrafficModel};
 use dh_env::{Error, Result};
@@ -53,6 +53,8 @@ pub struct SumoBridge {
     next_key: u64,
     lights: HashMap<String, String>,
     movers: Vec<(u32, f64, f64, f64, f64, u8)>,
+    /// The scenario's `[[lights]]` overrides.
+    programs: Vec<LightProgram>,
 }
 
 impl SumoBridge {
@@ -68,31 +70,43 @@ impl SumoBridge {
             next_key: 0,
             lights: HashMap::new(),
             movers: Vec::new(),
+            programs: scenario.lights.clone(),
         }
     }
 
-    /// For each light, the phase and its remaining time that the map's program has at episode
-    /// t = 0: SUMO runs `warmup_s` before t = 0, so its lights are set to this at the end of the
-    /// warm-up and then show what they would without one.
+    /// For each light, the phase and its remaining time that its program (the map's, or the
+    /// scenario's `[[lights]]` override) has at episode t = 0: SUMO runs `warmup_s` before
+    /// t = 0, so its lights are set to this at the end of the warm-up and then show what the
+    /// world's own light model would.
     fn light_sync(&self) -> Vec<(String, usize, f64)> {
         let mut out = Vec::new();
         for tl in self.map.tl_ids() {
-            let Some(logic) = self.map.tl_logic(tl) else { continue };
-            let cycle = logic.cycle_s();
-            if logic.phases.is_empty() || !cycle.is_finite() || cycle <= 0.0 {
-                continue;
-            }
-            let pos = (-logic.offset_s).rem_euclid(cycle);
-            let mut end = 0.0;
-            for (i, p) in logic.phases.iter().enumerate() {
-                end += p.duration_s.max(0.0);
-                if pos < end {
-                    out.push((tl.to_string(), i, end - pos));
-                    break;
+            let program = match self.programs.iter().find(|p| p.tl_id == tl) {
+                Some(p) => p.clone(),
+                None => {
+                    let Some(logic) = self.map.tl_logic(tl) else { continue };
+                    LightProgram {
+                        tl_id: tl.to_string(),
+                        offset_s: logic.offset_s,
+                        phases: logic.phases.clone(),
+                        replaced: false,
+                    }
                 }
+            };
+            if let Some((i, left)) = program.phase_at(0.0) {
+                out.push((tl.to_string(), i, left));
             }
         }
         out
+    }
+
+    /// Replacement programs for SUMO (`trafficlight.setProgramLogic`): (light, [(state, s)]).
+    fn replaced_programs(&self) -> Vec<(String, Vec<(String, f64)>)> {
+        self.programs
+            .iter()
+            .filter(|p| p.replaced)
+            .map(|p| (p.tl_id.clone(), p.phases.iter().map(|ph| (ph.state.clone(), ph.duration_s)).collect()))
+            .collect()
     }
 
     /// The SUMO route file of an episode (also what `start` hands to Python).
@@ -191,9 +205,10 @@ impl SumoBridge {
                 Some((seed, routes)) => {
                     let net = self.net.to_string_lossy().into_owned();
                     let sync = self.light_sync();
+                    let programs = self.replaced_programs();
                     obj.call_method1(
                         method,
-                        (net, routes.as_str(), *seed, self.demand.warmup_s, movers, sync),
+                        (net, routes.as_str(), *seed, self.demand.warmup_s, movers, sync, programs),
                     )?
                 }
                 None => obj.call_method1(method, (movers,))?,
