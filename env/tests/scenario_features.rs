@@ -538,3 +538,19 @@ fn all_features_together_are_deterministic_and_estimated() {
     assert!((st[2] - st[0] - 2.0).abs() < 1e-9, "{st:?}");
     assert!(s.scenario_duration_s() >= st[2]);
 }
+
+#[test]
+fn unknown_keys_in_the_new_tables_are_named() {
+    let e = load_err("uk_lights", "[[lights]]\ntls = \"C\"\noffset = 3.0\n");
+    assert!(e.contains("lights[0].offset"), "{e}");
+    let e = load_err(
+        "uk_lane_change",
+        "[[actors]]\nkind = \"car\"\nroute = { lanes = [\"C2T_2\"] }\nlane_changes = [{ at_s = 5.0, lane = \"C2T_1\" }]\n",
+    );
+    assert!(e.contains("actors[0].lane_changes[0].lane"), "{e}");
+    let e = load_err(
+        "uk_speed",
+        "[traffic]\nmode = \"native\"\n[[traffic.vehicles]]\nroute = [\"C2T\"]\nmax_speed = 5.0\n",
+    );
+    assert!(e.contains("traffic.vehicles[0].max_speed"), "{e}");
+}
