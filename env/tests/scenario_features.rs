@@ -554,3 +554,34 @@ fn unknown_keys_in_the_new_tables_are_named() {
     );
     assert!(e.contains("traffic.vehicles[0].max_speed"), "{e}");
 }
+
+#[test]
+fn native_traffic_obeys_the_overridden_light() {
+    // A car approaching C from the west: the map's program is green for it, the override
+    // (north–south green first) red for 45 s.
+    let body = r#"
+[traffic]
+mode = "native"
+
+[[traffic.vehicles]]
+route = ["W2C", "C2T"]
+depart_lane = 1
+depart_pos_m = 150.0
+depart_speed = 10.0
+"#;
+    let x_after = |s: &ResolvedScenario, secs: usize| {
+        let mut w = World::new(s, 0).unwrap();
+        w.attach_traffic(Box::new(IdmTraffic::new(s).unwrap())).unwrap();
+        for _ in 0..secs * 20 {
+            w.tick(&Control::default()).unwrap();
+        }
+        let v: Vec<_> = w.actors().iter().filter(|a| w.is_traffic_actor(a.id)).collect();
+        assert_eq!(v.len(), 1);
+        (v[0].pose.pos.x, v[0].speed_mps)
+    };
+    let (x, _) = x_after(&load("native_green", 0.0, body), 20);
+    assert!(x > 0.0, "passes C on the map's green: x = {x}");
+    let red = load("native_red", 0.0, &format!("{body}\n[[lights]]\ntls = \"C\"\nstart_phase = 3\n"));
+    let (x, v) = x_after(&red, 30);
+    assert!(x < -10.4 && x > -25.0 && v < 0.1, "waits at the stop line (x = −10.4): x = {x}, v = {v}");
+}
