@@ -650,7 +650,16 @@ pub fn resolve_traffic(
             rate,
             begin_s,
             end_s,
-            number: fl.number,
+            number: match (fl.number, fl.probability) {
+                (Some(n), Some(_)) => {
+                    return Err(rx.err(
+                        format!("{f}.number"),
+                        n,
+                        "`number` goes with `vehs_per_hour` (a probability flow ends at `end_s`)",
+                    ))
+                }
+                (n, _) => n,
+            },
             depart_lane: rx.lane(&format!("{f}.depart_lane"), &fl.depart_lane)?,
             depart_speed: rx.speed(&format!("{f}.depart_speed"), &fl.depart_speed)?,
         });
@@ -914,7 +923,15 @@ impl TrafficDemand {
                 FlowRate::PerHour(v) => format!("vehsPerHour=\"{v}\""),
                 FlowRate::Probability(p) => format!("probability=\"{p}\""),
             };
-            let number = f.number.map(|n| format!(" number=\"{n}\"")).unwrap_or_default();
+            // SUMO takes `end` or `number`, not both: a capped flow gets the departures that
+            // fall before `end` as its `number` (as the native model counts them).
+            let end_or_number = match (f.number, f.rate) {
+                (Some(n), FlowRate::PerHour(v)) => {
+                    let before_end = ((f.end_s - f.begin_s) * v / 3600.0 - 1e-9).ceil().max(1.0) as u32;
+                    format!("number=\"{}\"", n.min(before_end))
+                }
+                _ => format!("end=\"{e:.2}\""),
+            };
             let mut pos = f.depart_pos_m.map(|p| format!(" departPos=\"{p:.3}\"")).unwrap_or_default();
             if let Some(sf) = f.speed_factor {
                 let _ = write!(pos, " speedFactor=\"{sf}\"");
@@ -922,7 +939,7 @@ impl TrafficDemand {
             entries.push((
                 b,
                 format!(
-                    "    <flow id=\"{}\" type=\"{}\" begin=\"{b:.2}\" end=\"{e:.2}\" {rate}{number} departLane=\"{}\" departSpeed=\"{}\"{pos}>\n        <route edges=\"{}\"/>\n    </flow>\n",
+                    "    <flow id=\"{}\" type=\"{}\" begin=\"{b:.2}\" {end_or_number} {rate} departLane=\"{}\" departSpeed=\"{}\"{pos}>\n        <route edges=\"{}\"/>\n    </flow>\n",
                     xml_escape(&f.id),
                     xml_escape(&self.vtypes[f.vtype].id),
                     fmt_lane(&f.depart_lane),
