@@ -57,6 +57,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     pr.add_argument(
         "--traffic", choices=["sumo", "native", "none"], help="override every scenario's traffic mode"
     )
+    pr.add_argument(
+        "--update-doc",
+        type=Path,
+        help="rewrite the part of this Markdown file between <!-- probe:begin --> and <!-- probe:end -->",
+    )
     pr.set_defaults(func=_probe)
 
     im = cmds.add_parser(
@@ -120,6 +125,8 @@ def _probe(args: argparse.Namespace) -> int:
     files = _expand(args.files)
     rows = suite_probe.probe(files, policies, seed=args.seed, jobs=args.jobs, traffic=args.traffic)
     summary = suite_probe.write_outputs(rows, args.out)
+    if args.update_doc is not None:
+        suite_probe.update_doc(args.update_doc, suite_probe.markdown(rows, summary))
     print(suite_probe.markdown(rows, summary).split("\n\n")[0])
     return 0
 

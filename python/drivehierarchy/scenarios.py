@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+import importlib.util
 from pathlib import Path
 
 from drivehierarchy._core import ScenarioError
@@ -42,10 +44,15 @@ def resolve_scenario(scenario: str | Path | None) -> str:
     )
 
 
+@functools.cache
 def sumo_home() -> str | None:
-    """SUMO_HOME of the installed `eclipse-sumo` package (for `sumo:` map paths), if any."""
-    try:
-        import sumo
-    except ImportError:
+    """SUMO_HOME of the installed `eclipse-sumo` package (for `sumo:` map paths), if any.
+
+    The package's own folder (`sumo.SUMO_HOME` is its `__init__`'s directory), found without
+    importing it: `import sumo` reads the wheel's metadata and costs 30-130 ms, which was most of
+    a first scenario load in a process (scripts/bench_suite_load.py).
+    """
+    spec = importlib.util.find_spec("sumo")
+    if spec is None or spec.origin is None:
         return None
-    return str(sumo.SUMO_HOME)
+    return str(Path(spec.origin).parent)

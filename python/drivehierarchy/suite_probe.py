@@ -25,6 +25,8 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
+from drivehierarchy._core import ConfigError
+
 POLICIES = ("expert", "zero", "constant", "follower")
 
 
@@ -58,6 +60,7 @@ def run_one(scenario: str, policy: str, seed: int, traffic: str | None) -> dict[
         result = run_episode(env, _agent(policy), seed=seed)
         traffic_mode = env.traffic_mode
         category = env.sim.category
+        trajectory = env.sim.trajectory_hash
     finally:
         env.close()
     rec = result.score
@@ -76,6 +79,7 @@ def run_one(scenario: str, policy: str, seed: int, traffic: str | None) -> dict[
         "termination": rec["termination_reason"],
         "events": sorted({e["type"] for e in rec["events"]}),
         "sim_s": float(rec["meta"]["duration_game"]),
+        "trajectory_hash": trajectory,
         "wall_s": round(time.perf_counter() - t0, 3),
     }
 
@@ -181,3 +185,16 @@ def write_outputs(rows: list[dict[str, Any]], out: Path) -> dict[str, Any]:
     )
     (out / "probe.md").write_text(markdown(rows, summary), encoding="utf-8")
     return summary
+
+
+BEGIN, END = "<!-- probe:begin -->", "<!-- probe:end -->"
+
+
+def update_doc(path: Path, table: str) -> None:
+    """Replaces the generated part of a Markdown page (between the probe markers)."""
+    text = path.read_text(encoding="utf-8")
+    if text.count(BEGIN) != 1 or text.count(END) != 1 or text.index(BEGIN) > text.index(END):
+        raise ConfigError(f"{path}: needs exactly one {BEGIN} … {END} block")
+    head, rest = text.split(BEGIN)
+    _, tail = rest.split(END)
+    path.write_text(f"{head}{BEGIN}\n{table}{END}{tail}", encoding="utf-8")

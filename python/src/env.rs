@@ -3,6 +3,7 @@
 
 use crate::errors::to_pyerr;
 use crate::json::to_py;
+use crate::sumo_native::{NativeSumoBridge, PyNativeSumo};
 use crate::traffic::SumoBridge;
 use dh_agents::expert::{Expert, ExpertParams};
 use dh_env::drive::{ActuationBridge, Control, Decision, DecisionFailure};
@@ -248,7 +249,8 @@ impl PySim {
     }
 
     /// Background traffic from the next `reset` on: `"none"`, `"native"` (the Rust IDM model),
-    /// or `"sumo"` with `sumo` = the object owning libsumo (`envs.traffic.SumoTraffic`).
+    /// or `"sumo"` with `sumo` = the object owning SUMO: `NativeSumo` (libsumo's C++ API, driven
+    /// from Rust) or the Python backend (`envs.traffic.SumoTraffic`).
     #[pyo3(signature = (mode, sumo=None))]
     fn set_traffic(&mut self, py: Python<'_>, mode: &str, sumo: Option<Py<PyAny>>) -> PyResult<()> {
         let model: Option<Box<dyn dh_env::world::TrafficModel>> = match (mode, sumo) {
@@ -256,7 +258,13 @@ impl PySim {
             ("native", None) => Some(Box::new(
                 dh_env::world::idm::IdmTraffic::new(self.inner.scenario()).map_err(|e| err(py, e))?,
             )),
-            ("sumo", Some(obj)) => Some(Box::new(SumoBridge::new(obj, self.inner.scenario()))),
+            ("sumo", Some(obj)) => match obj.bind(py).cast::<PyNativeSumo>() {
+                Ok(native) => {
+                    let session = native.borrow().session.clone();
+                    Some(Box::new(NativeSumoBridge::new(session, self.inner.scenario())))
+                }
+                Err(_) => Some(Box::new(SumoBridge::new(obj, self.inner.scenario()))),
+            },
             (m, s) => {
                 let why = match m {
                     "sumo" => "mode 'sumo' needs the SumoTraffic object",
@@ -434,6 +442,8 @@ pub fn default_sim_config() -> String {
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PySim>()?;
     m.add_class::<PyGifWriter>()?;
+    m.add_class::<PyNativeSumo>()?;
+    m.add("NATIVE_SUMO_SHIM", crate::sumo_native::SHIM_FILE)?;
     m.add_function(wrap_pyfunction!(rescore, m)?)?;
     m.add_function(wrap_pyfunction!(validate_scenario, m)?)?;
     m.add_function(wrap_pyfunction!(default_sim_config, m)?)?;

@@ -6,6 +6,7 @@ mod benchmark;
 mod env;
 mod errors;
 mod json;
+mod sumo_native;
 mod traffic;
 
 #[pymodule]

@@ -1,5 +1,6 @@
-//! The SUMO co-simulation seam: a [`TrafficModel`] whose ticks call the Python object that owns
-//! libsumo (`drivehierarchy.envs.traffic.SumoTraffic`).
+//! The SUMO co-simulation seam: what both SUMO backends share ([`SumoSync`], [`Static`]) and the
+//! Python backend's [`TrafficModel`], whose ticks call the Python object that owns libsumo
+//! (`drivehierarchy.envs.traffic.SumoTraffic`). The native backend is `sumo_native.rs`.
 //!
 //! Per tick: one Python call `tick(movers)` with the ego and the mirrored scenario actors (SUMO
 //! front-bumper position, SUMO angle, speed); it moves them in SUMO, steps SUMO once and returns
@@ -30,45 +31,75 @@ const TL_RED_YELLOW_GREEN_STATE: i32 = 0x20;
 /// span a few lanes either side), m.
 const EGO_ON_ROUTE_M: f64 = 5.0;
 
+/// A traffic vehicle's attributes that do not change (read once, when it departs).
 #[derive(Debug, Clone, Copy)]
-struct Static {
-    key: u64,
-    kind: ActorKind,
-    length_m: f64,
-    width_m: f64,
-    height_m: f64,
-    color: [u8; 3],
+pub(crate) struct Static {
+    pub key: u64,
+    pub kind: ActorKind,
+    pub length_m: f64,
+    pub width_m: f64,
+    pub height_m: f64,
+    pub color: [u8; 3],
 }
 
-/// The world side of the SUMO co-simulation.
+impl Static {
+    /// From SUMO's type attributes; SUMO's default colour (yellow) gets a palette colour.
+    pub fn new(key: u64, length_m: f64, width_m: f64, height_m: f64, vclass: &str, color: &[i64]) -> Static {
+        let kind = kind_of_vclass(VClass::from_sumo(vclass).unwrap_or(VClass::Passenger));
+        let color = if color.len() >= 3 && color != [255, 255, 0, 255] {
+            [color[0].clamp(0, 255) as u8, color[1].clamp(0, 255) as u8, color[2].clamp(0, 255) as u8]
+        } else {
+            PALETTE[key as usize % PALETTE.len()]
+        };
+        Static { key, kind, length_m, width_m, height_m, color }
+    }
+
+    /// The world's agent from SUMO's front-bumper position and SUMO angle (degrees, clockwise
+    /// from north).
+    pub fn agent(&self, x: f64, y: f64, angle: f64, speed: f64, signals: i64) -> TrafficAgent {
+        let yaw = (90.0 - angle).to_radians();
+        let fwd = Vec2::new(yaw.cos(), yaw.sin());
+        let centre = Vec2::new(x, y) - fwd * (0.5 * self.length_m);
+        TrafficAgent {
+            key: self.key,
+            kind: self.kind,
+            length_m: self.length_m,
+            width_m: self.width_m,
+            height_m: self.height_m,
+            color: self.color,
+            pose: Pose::new(centre, dh_env::geom::wrap_angle(yaw)),
+            speed_mps: speed.max(0.0),
+            signals: signals.max(0) as u32,
+        }
+    }
+}
+
+/// One ego/actor placement for SUMO: (id, front x, front y, SUMO angle, speed, moveToXY
+/// keepRoute); id 0 is the ego, others are scenario actor ids.
+pub(crate) type Mover = (u32, f64, f64, f64, f64, u8);
+
+/// What both SUMO backends share: the scenario's side of the co-simulation (net, demand, ego
+/// route, mirrored actors) and the per-tick movers.
 #[derive(Debug)]
-pub struct SumoBridge {
-    obj: Py<PyAny>,
-    net: PathBuf,
-    map: Arc<dh_env::map::Network>,
-    demand: TrafficDemand,
-    ego: ResolvedEgo,
-    mirrors: Vec<MirrorSpec>,
-    vehicles: HashMap<String, Static>,
-    next_key: u64,
-    lights: HashMap<String, String>,
-    movers: Vec<(u32, f64, f64, f64, f64, u8)>,
+pub(crate) struct SumoSync {
+    pub net: PathBuf,
+    pub map: Arc<dh_env::map::Network>,
+    pub demand: TrafficDemand,
+    pub ego: ResolvedEgo,
+    pub mirrors: Vec<MirrorSpec>,
+    pub movers: Vec<Mover>,
     /// The scenario's `[[lights]]` overrides.
-    programs: Vec<LightProgram>,
+    pub programs: Vec<LightProgram>,
 }
 
-impl SumoBridge {
-    pub fn new(obj: Py<PyAny>, scenario: &ResolvedScenario) -> SumoBridge {
-        SumoBridge {
-            obj,
+impl SumoSync {
+    pub fn new(scenario: &ResolvedScenario) -> SumoSync {
+        SumoSync {
             net: scenario.map_path.clone(),
             map: scenario.map.clone(),
             demand: scenario.traffic.clone(),
             ego: scenario.ego.clone(),
             mirrors: mirror_specs(&scenario.actors),
-            vehicles: HashMap::new(),
-            next_key: 0,
-            lights: HashMap::new(),
             movers: Vec::new(),
             programs: scenario.lights.clone(),
         }
@@ -78,7 +109,7 @@ impl SumoBridge {
     /// scenario's `[[lights]]` override) has at episode t = 0: SUMO runs `warmup_s` before
     /// t = 0, so its lights are set to this at the end of the warm-up and then show what the
     /// world's own light model would.
-    fn light_sync(&self) -> Vec<(String, usize, f64)> {
+    pub fn light_sync(&self) -> Vec<(String, usize, f64)> {
         let mut out = Vec::new();
         for tl in self.map.tl_ids() {
             let program = match self.programs.iter().find(|p| p.tl_id == tl) {
@@ -101,7 +132,7 @@ impl SumoBridge {
     }
 
     /// Replacement programs for SUMO (`trafficlight.setProgramLogic`): (light, [(state, s)]).
-    fn replaced_programs(&self) -> Vec<(String, Vec<(String, f64)>)> {
+    pub fn replaced_programs(&self) -> Vec<(String, Vec<(String, f64)>)> {
         self.programs
             .iter()
             .filter(|p| p.replaced)
@@ -109,16 +140,15 @@ impl SumoBridge {
             .collect()
     }
 
-    /// The SUMO route file of an episode (also what `start` hands to Python).
+    /// The SUMO route file of an episode.
     pub fn routes_xml(&self, seed: u64) -> String {
         self.demand.sumo_routes_xml(&self.map, seed, &self.ego, &self.mirrors)
     }
 
-    /// Movers for SUMO: (id, front x, front y, SUMO angle, speed, moveToXY keepRoute). The ego
-    /// near its route is mapped onto the route's edges only (keepRoute=1, several times cheaper
-    /// than SUMO's search of the whole net); elsewhere, and for the scenario's actors, onto any
-    /// lane (keepRoute=2).
-    fn fill_movers(&mut self, input: &TrafficInput<'_>) {
+    /// Movers for SUMO. The ego near its route is mapped onto the route's edges only
+    /// (keepRoute=1, several times cheaper than SUMO's search of the whole net); elsewhere, and
+    /// for the scenario's actors, onto any lane (keepRoute=2).
+    pub fn fill_movers(&mut self, input: &TrafficInput<'_>) {
         self.movers.clear();
         let sumo = |id: u32, pose: Pose, length: f64, speed: f64, keep: u8| {
             let front = pose.pos + pose.forward() * (0.5 * length);
@@ -133,6 +163,28 @@ impl SumoBridge {
             }
         }
     }
+}
+
+/// The world side of the SUMO co-simulation through the Python backend.
+#[derive(Debug)]
+pub struct SumoBridge {
+    obj: Py<PyAny>,
+    sync: SumoSync,
+    vehicles: HashMap<String, Static>,
+    next_key: u64,
+    lights: HashMap<String, String>,
+}
+
+impl SumoBridge {
+    pub fn new(obj: Py<PyAny>, scenario: &ResolvedScenario) -> SumoBridge {
+        SumoBridge {
+            obj,
+            sync: SumoSync::new(scenario),
+            vehicles: HashMap::new(),
+            next_key: 0,
+            lights: HashMap::new(),
+        }
+    }
 
     fn read(&mut self, ret: &Bound<'_, PyAny>, out: &mut TrafficFrame) -> PyResult<()> {
         let tuple = ret.cast::<PyTuple>()?;
@@ -142,15 +194,9 @@ impl SumoBridge {
         for item in new.cast::<PyList>()?.iter() {
             let (vid, length_m, width_m, height_m, vclass, color): (String, f64, f64, f64, String, Vec<i64>) =
                 item.extract()?;
-            let kind = kind_of_vclass(VClass::from_sumo(&vclass).unwrap_or(VClass::Passenger));
             let key = self.next_key;
             self.next_key += 1;
-            let color = if color.len() >= 3 && color != [255, 255, 0, 255] {
-                [color[0].clamp(0, 255) as u8, color[1].clamp(0, 255) as u8, color[2].clamp(0, 255) as u8]
-            } else {
-                PALETTE[key as usize % PALETTE.len()]
-            };
-            self.vehicles.insert(vid, Static { key, kind, length_m, width_m, height_m, color });
+            self.vehicles.insert(vid, Static::new(key, length_m, width_m, height_m, &vclass, &color));
         }
         let py = ret.py();
         let (k_pos, k_ang, k_speed, k_sig) = (
@@ -168,20 +214,7 @@ impl SumoBridge {
             let angle: f64 = field(d, k_ang.as_any(), vid)?.extract()?;
             let speed: f64 = field(d, k_speed.as_any(), vid)?.extract()?;
             let signals: i64 = field(d, k_sig.as_any(), vid)?.extract()?;
-            let yaw = (90.0 - angle).to_radians();
-            let fwd = Vec2::new(yaw.cos(), yaw.sin());
-            let centre = Vec2::new(x, y) - fwd * (0.5 * st.length_m);
-            out.agents.push(TrafficAgent {
-                key: st.key,
-                kind: st.kind,
-                length_m: st.length_m,
-                width_m: st.width_m,
-                height_m: st.height_m,
-                color: st.color,
-                pose: Pose::new(centre, dh_env::geom::wrap_angle(yaw)),
-                speed_mps: speed.max(0.0),
-                signals: signals.max(0) as u32,
-            });
+            out.agents.push(st.agent(x, y, angle, speed, signals));
         }
         let lights = tuple.get_item(2)?;
         let k_state = TL_RED_YELLOW_GREEN_STATE.into_pyobject(py)?;
@@ -200,15 +233,15 @@ impl SumoBridge {
     fn call(&mut self, method: &str, extra: Option<(u64, String)>, out: &mut TrafficFrame) -> Result<()> {
         Python::attach(|py| {
             let obj = self.obj.bind(py).clone();
-            let movers = PyList::new(py, &self.movers)?;
+            let movers = PyList::new(py, &self.sync.movers)?;
             let ret = match &extra {
                 Some((seed, routes)) => {
-                    let net = self.net.to_string_lossy().into_owned();
-                    let sync = self.light_sync();
-                    let programs = self.replaced_programs();
+                    let net = self.sync.net.to_string_lossy().into_owned();
+                    let sync = self.sync.light_sync();
+                    let programs = self.sync.replaced_programs();
                     obj.call_method1(
                         method,
-                        (net, routes.as_str(), *seed, self.demand.warmup_s, movers, sync, programs),
+                        (net, routes.as_str(), *seed, self.sync.demand.warmup_s, movers, sync, programs),
                     )?
                 }
                 None => obj.call_method1(method, (movers,))?,
@@ -230,13 +263,13 @@ impl TrafficModel for SumoBridge {
         self.vehicles.clear();
         self.lights.clear();
         self.next_key = 0;
-        let routes = self.routes_xml(seed);
-        self.fill_movers(input);
+        let routes = self.sync.routes_xml(seed);
+        self.sync.fill_movers(input);
         self.call("start", Some((seed, routes)), out)
     }
 
     fn tick(&mut self, input: &TrafficInput<'_>, out: &mut TrafficFrame) -> Result<()> {
-        self.fill_movers(input);
+        self.sync.fill_movers(input);
         self.call("tick", None, out)
     }
 

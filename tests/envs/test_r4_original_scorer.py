@@ -171,7 +171,7 @@ class Weave:
 
 CASES = [
     ("07_sudden_brake/town01_lead_brakes", ExpertAgent),
-    ("10_roundabout/town01_roundabout_exit_south", ExpertAgent),
+    ("10_roundabout/town01_10_roundabout_exit_south", ExpertAgent),
     ("03_turning/town01_right_turn_signalised", lambda: ConstantAgent([0.0, 0.0])),
     ("03_turning/town01_right_turn_signalised", lambda: ConstantAgent([0.3, 8.0])),
     ("01_pedestrian/town01_midblock_crossing", lambda: ConstantAgent([0.0, 9.0])),

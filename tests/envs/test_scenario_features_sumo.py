@@ -2,7 +2,8 @@
 drive SUMO's signals with the same timing as the world's own light model, and per-vehicle
 `max_speed_mps` / `speed_factor` of `[traffic]` reach SUMO's vehicles.
 
-Real libsumo on the project's town01 network; the ego drives east on C2T, away from light C,
+Real libsumo (both SUMO backends: "native", libsumo's C++ API from Rust, and "python", the
+libsumo module) on the project's town01 network; the ego drives east on C2T, away from light C,
 whose west approach (W2C_1) is watched.
 """
 
@@ -68,9 +69,16 @@ def _head(env: object) -> str:
     return {lane: c for _, lane, c in env.sim.light_states()}["W2C_1"]  # type: ignore[attr-defined]
 
 
-def _timeline(scenario: Path, traffic: str, seconds: float) -> tuple[Timeline, list[np.ndarray]]:
+@pytest.fixture(params=["native", "python"])
+def backend(request: pytest.FixtureRequest) -> str:
+    return str(request.param)
+
+
+def _timeline(
+    scenario: Path, traffic: str, seconds: float, backend: str = "auto"
+) -> tuple[Timeline, list[np.ndarray]]:
     """(time, W2C_1 head colour) after every step, and the traffic rows, under the expert."""
-    env = make_env(scenario, traffic=traffic)
+    env = make_env(scenario, traffic=traffic, sumo_backend=backend)
     try:
         env.reset(seed=0)
         out = [(0.0, _head(env))]
@@ -90,9 +98,9 @@ def _switches(timeline: list[tuple[float, str]]) -> list[tuple[float, str]]:
 
 
 @pytest.mark.parametrize("kind", sorted(LIGHTS))
-def test_light_override_timing_matches_in_sumo_and_native(tmp_path: Path, kind: str) -> None:
+def test_light_override_timing_matches_in_sumo_and_native(tmp_path: Path, kind: str, backend: str) -> None:
     p = write_scenario(tmp_path, EGO + LIGHTS[kind] + TRAFFIC)
-    sumo, _ = _timeline(p, "sumo", 26.0)
+    sumo, _ = _timeline(p, "sumo", 26.0, backend)
     own, _ = _timeline(p, "none", 26.0)
     s_sw, o_sw = _switches(sumo), _switches(own)
     assert [c for _, c in s_sw] == [c for _, c in o_sw], (s_sw, o_sw)
@@ -106,9 +114,9 @@ def test_light_override_timing_matches_in_sumo_and_native(tmp_path: Path, kind: 
         assert abs(s_sw[1][0] - 12.0) <= 0.26 and abs(s_sw[2][0] - 20.0) <= 0.26, s_sw
 
 
-def test_per_vehicle_speeds_reach_sumo(tmp_path: Path) -> None:
+def test_per_vehicle_speeds_reach_sumo(tmp_path: Path, backend: str) -> None:
     p = write_scenario(tmp_path, EGO + TRAFFIC)
-    _, rows = _timeline(p, "sumo", 15.0)
+    _, rows = _timeline(p, "sumo", 15.0, backend)
     last = rows[-1]
     assert len(last) == 2, last
     by_x = last[np.argsort(last[:, 1])]

@@ -1,12 +1,14 @@
 """Live background traffic: SUMO co-simulated through libsumo (docs/traffic.md).
 
 Every test starts the real SUMO of the `eclipse-sumo` / `libsumo` packages on the project's
-town01 network (or the suite's Ingolstadt net) and drives the real Rust world.
+town01 network (or the suite's Ingolstadt net) and drives the real Rust world, once per SUMO
+backend: "native" (libsumo's C++ API driven from Rust) and "python" (the libsumo module).
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import subprocess
 import sys
 from pathlib import Path
@@ -16,13 +18,20 @@ import pytest
 
 pytest.importorskip("libsumo")
 
-from traffic_helpers import BENCH, frame, make_env, run_expert, traffic_rows, write_scenario
+from traffic_helpers import BENCH, IS_TRAFFIC, frame, make_env, run_expert, traffic_rows, write_scenario
 
 from drivehierarchy import _core
 from drivehierarchy._core import ConfigError, ScenarioError, SimulationError
-from drivehierarchy.scenarios import sumo_home
+from drivehierarchy.envs.traffic import SumoTraffic, native
+from drivehierarchy.scenarios import builtin_root, sumo_home
 
-FLOW_SCENARIO = "06_traffic_flow/ingolstadt_westbound_flow"
+FLOW_SCENARIO = "06_traffic_flow/ingolstadt_06_westbound_flow"
+
+
+@pytest.fixture(params=["native", "python"])
+def backend(request: pytest.FixtureRequest) -> str:
+    return str(request.param)
+
 
 # -- the [traffic] table ---------------------------------------------------------------------------
 
@@ -63,7 +72,7 @@ def test_routes_are_seeded_and_dense_enough() -> None:
         env.close()
 
 
-def test_config_overrides_the_scenario_mode(tmp_path: Path) -> None:
+def test_config_overrides_the_scenario_mode(tmp_path: Path, backend: str) -> None:
     env = make_env(BENCH, traffic="none")
     try:
         assert env.traffic_mode == "none"
@@ -75,7 +84,7 @@ def test_config_overrides_the_scenario_mode(tmp_path: Path) -> None:
         make_env(BENCH, traffic="carla")
     # A scenario without a [traffic] table runs SUMO when asked (no demand: just the ego).
     p = write_scenario(tmp_path, '[ego]\nstart = { lane = "W2C_1", s = 20.0 }\nroute_edges = ["W2C"]\n')
-    env = make_env(p, traffic="sumo")
+    env = make_env(p, traffic="sumo", sumo_backend=backend)
     try:
         env.reset(seed=0)
         env.step(np.array([0.0, 5.0]))
@@ -84,7 +93,7 @@ def test_config_overrides_the_scenario_mode(tmp_path: Path) -> None:
         env.close()
 
 
-def test_sumo_start_failure_carries_sumos_message(tmp_path: Path) -> None:
+def test_sumo_start_failure_carries_sumos_message(tmp_path: Path, backend: str) -> None:
     (tmp_path / "bad.add.xml").write_text(
         '<additional><vType id="car" carFollowModel="NoSuchModel"/></additional>', encoding="utf-8"
     )
@@ -100,7 +109,7 @@ def test_sumo_start_failure_carries_sumos_message(tmp_path: Path) -> None:
         route = ["W2C", "C2T"]
         """,
     )
-    env = make_env(p)
+    env = make_env(p, sumo_backend=backend)
     try:
         with pytest.raises(SimulationError) as e:
             env.reset(seed=0)
@@ -112,8 +121,8 @@ def test_sumo_start_failure_carries_sumos_message(tmp_path: Path) -> None:
         env.close()
 
 
-def test_one_sumo_per_process() -> None:
-    a, b = make_env(BENCH), make_env(BENCH)
+def test_one_sumo_per_process(backend: str) -> None:
+    a, b = make_env(BENCH, sumo_backend=backend), make_env(BENCH, sumo_backend=backend)
     try:
         a.reset(seed=0)
         with pytest.raises(SimulationError, match="one simulation per process"):
@@ -128,7 +137,7 @@ def test_one_sumo_per_process() -> None:
 # -- behaviour -------------------------------------------------------------------------------------
 
 
-def test_sumo_queues_behind_a_stopped_ego_and_never_passes_through(tmp_path: Path) -> None:
+def test_sumo_queues_behind_a_stopped_ego_and_never_passes_through(tmp_path: Path, backend: str) -> None:
     # One-lane road T2R: the ego stands 40 m in while SUMO runs 60 s of warm-up (the protocol
     # ends an episode after 5 s at rest, so the long wait happens in the warm-up, where SUMO
     # sees the ego standing at its start), then for 4.5 s of the episode with the brake held.
@@ -146,7 +155,7 @@ def test_sumo_queues_behind_a_stopped_ego_and_never_passes_through(tmp_path: Pat
         vehs_per_hour = 900
         """,
     )
-    env = make_env(p, action_mode="raw")
+    env = make_env(p, action_mode="raw", sumo_backend=backend)
     try:
         env.reset(seed=3)
         queued_max = 0
@@ -171,7 +180,7 @@ def test_sumo_queues_behind_a_stopped_ego_and_never_passes_through(tmp_path: Pat
         env.close()
 
 
-def test_sumo_vehicles_stop_at_a_red_sumo_switches(tmp_path: Path) -> None:
+def test_sumo_vehicles_stop_at_a_red_sumo_switches(tmp_path: Path, backend: str) -> None:
     # Light C gives W2C/T2C green for the first 45 s of its cycle; N2C is red meanwhile
     # (scenarios/maps/README.md). SUMO runs the program; the world's signal heads follow it.
     p = write_scenario(
@@ -188,7 +197,7 @@ def test_sumo_vehicles_stop_at_a_red_sumo_switches(tmp_path: Path) -> None:
         vehs_per_hour = 1200
         """,
     )
-    env = make_env(p)  # the expert drives east on green meanwhile
+    env = make_env(p, sumo_backend=backend)  # the expert drives east on green meanwhile
     try:
         env.reset(seed=0)
         waited, crossed_on_green, head_colours = 0, 0, set()
@@ -214,8 +223,8 @@ def test_sumo_vehicles_stop_at_a_red_sumo_switches(tmp_path: Path) -> None:
         env.close()
 
 
-def test_fifty_vehicles_expert_reaches_destination_without_collision() -> None:
-    out = run_expert(BENCH, seed=0)
+def test_fifty_vehicles_expert_reaches_destination_without_collision(backend: str) -> None:
+    out = run_expert(BENCH, seed=0, sumo_backend=backend)
     counts = out["counts"]
     assert isinstance(counts, list) and counts[0] >= 50, counts[:3]
     info = out["info"]
@@ -224,18 +233,19 @@ def test_fifty_vehicles_expert_reaches_destination_without_collision() -> None:
     assert not [e for e in info["events"] if str(e["type"]).startswith("collision")], info["events"]
 
 
-def test_sumo_traffic_is_deterministic_across_runs_and_processes() -> None:
-    a = run_expert(BENCH, seed=5, steps=60)
-    b = run_expert(BENCH, seed=5, steps=60)
-    c = run_expert(BENCH, seed=6, steps=60)
+def test_sumo_traffic_is_deterministic_across_runs_and_processes(backend: str) -> None:
+    a = run_expert(BENCH, seed=5, steps=60, sumo_backend=backend)
+    b = run_expert(BENCH, seed=5, steps=60, sumo_backend=backend)
+    c = run_expert(BENCH, seed=6, steps=60, sumo_backend=backend)
     assert a["traffic"] == b["traffic"] and a["trajectory"] == b["trajectory"]
     assert a["traffic"] != c["traffic"]
     code = (
         "import json, sys; sys.path.insert(0, sys.argv[1]); import traffic_helpers as t; "
-        "r = t.run_expert(t.BENCH, seed=5, steps=60); print(json.dumps([r['traffic'], r['trajectory']]))"
+        "r = t.run_expert(t.BENCH, seed=5, steps=60, sumo_backend=sys.argv[2]); "
+        "print(json.dumps([r['traffic'], r['trajectory']]))"
     )
     res = subprocess.run(
-        [sys.executable, "-c", code, str(Path(__file__).parent)],
+        [sys.executable, "-c", code, str(Path(__file__).parent), backend],
         capture_output=True,
         text=True,
         timeout=300,
@@ -244,8 +254,8 @@ def test_sumo_traffic_is_deterministic_across_runs_and_processes() -> None:
     assert json.loads(res.stdout.strip().splitlines()[-1]) == [a["traffic"], a["trajectory"]]
 
 
-def test_builtin_traffic_flow_scenario_runs_on_sumo_by_default() -> None:
-    env = make_env(FLOW_SCENARIO)
+def test_builtin_traffic_flow_scenario_runs_on_sumo_by_default(backend: str) -> None:
+    env = make_env(FLOW_SCENARIO, sumo_backend=backend)
     try:
         assert env.traffic_mode == "sumo"
         env.reset(seed=0)
@@ -255,3 +265,105 @@ def test_builtin_traffic_flow_scenario_runs_on_sumo_by_default() -> None:
         assert env.sim.traffic == "sumo"
     finally:
         env.close()
+
+
+# -- the two SUMO backends -------------------------------------------------------------------------
+
+
+def test_native_and_python_backends_give_the_same_traffic() -> None:
+    # Same command line, warm-up, movers, departure keys and vehicle order: bit-identical.
+    native = run_expert(BENCH, seed=5, steps=60, sumo_backend="native")
+    python = run_expert(BENCH, seed=5, steps=60, sumo_backend="python")
+    assert native["counts"] == python["counts"]
+    assert native["traffic"] == python["traffic"] and native["trajectory"] == python["trajectory"]
+
+
+def test_native_backend_is_the_default_and_a_missing_shim_falls_back(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    env = make_env(BENCH)
+    try:
+        assert isinstance(env._sumo, _core.NativeSumo)
+    finally:
+        env.close()
+    # A build without SUMO's headers has no shim: "auto" says so once and uses the Python backend.
+    _, lib, binary = native.native_sumo_paths()
+    missing = tmp_path / _core.NATIVE_SUMO_SHIM
+    monkeypatch.setattr(native, "native_sumo_paths", lambda: (missing, lib, binary))
+    with caplog.at_level(logging.WARNING, logger=native.__name__):
+        assert isinstance(native.make_sumo_traffic("auto"), SumoTraffic)
+    assert str(missing) in caplog.text and "Python libsumo backend" in caplog.text, caplog.text
+    with pytest.raises(SimulationError, match="was not built"):
+        native.make_sumo_traffic("native")
+    with pytest.raises(ConfigError, match="sumo_backend"):
+        make_env(BENCH, sumo_backend="cpp")
+
+
+def test_native_backend_loads_sumo_only_when_started_and_never_the_python_module() -> None:
+    # Importing drivehierarchy pulls no SUMO library in; a native SUMO env loads libsumocpp
+    # (and the shim) but never the libsumo module: one SUMO copy per simulation.
+    code = (
+        "import sys; sys.path.insert(0, sys.argv[1]); import traffic_helpers as t; "
+        "maps = lambda: open('/proc/self/maps').read(); before = maps(); "
+        "env = t.make_env(t.BENCH, sumo_backend='native'); env.reset(seed=0); env.step(env.expert_action()); "
+        "after = maps(); env.close(); "
+        "print('libsumocpp' in before, 'libsumocpp' in after, '_dh_sumo_shim' in after, "
+        "'_libsumo' in after, 'libsumo' in sys.modules)"
+    )
+    res = subprocess.run(
+        [sys.executable, "-c", code, str(Path(__file__).parent)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=True,
+    )
+    assert res.stdout.split() == ["False", "True", "True", "False", "False"], res.stdout + res.stderr
+
+
+def test_python_and_native_backends_share_one_simulation_per_process() -> None:
+    a, b = make_env(BENCH, sumo_backend="native"), make_env(BENCH, sumo_backend="python")
+    try:
+        a.reset(seed=0)
+        with pytest.raises(SimulationError, match="one simulation per process"):
+            b.reset(seed=0)
+        a.close()
+        b.reset(seed=0)
+        a = make_env(BENCH, sumo_backend="native")
+        with pytest.raises(SimulationError, match="one simulation per process"):
+            a.reset(seed=0)
+    finally:
+        a.close()
+        b.close()
+
+
+def test_backends_agree_with_mirrored_scenario_actors(tmp_path: Path) -> None:
+    # The built-in crossing scenario's cars, bus and parked cars are placed in SUMO (mirrors; two
+    # cars leave the world at the end of their paths, and so do their SUMO doubles) beside SUMO
+    # flows on the same roads. Both backends must give the same traffic, tick for tick.
+    src = builtin_root() / "r4" / "04_intersection" / "town01_straight_cross_traffic.toml"
+    body = src.read_text(encoding="utf-8")
+    body = body[body.index("[ego]") :] + (
+        '\n[traffic]\nwarmup_s = 10.0\n[[traffic.flows]]\nfrom = "T2C"\nto = "C2W"\nvehs_per_hour = 600\n'
+        '[[traffic.flows]]\nfrom = "S2C"\nto = "C2N"\nvehs_per_hour = 600\n'
+    )
+    p = write_scenario(tmp_path, body)
+    runs = {}
+    for backend in ("native", "python"):
+        env = make_env(p, sumo_backend=backend)
+        try:
+            env.reset(seed=2)
+            digest, scripted, vehicles = [], [], 0
+            for _ in range(120):
+                term = env.step(env.expert_action())[2]
+                rows = env.sim.actors_array()
+                digest.append(np.ascontiguousarray(rows).tobytes())
+                scripted.append(int((rows[:, IS_TRAFFIC] == 0.0).sum()))
+                vehicles = max(vehicles, int((rows[:, IS_TRAFFIC] == 1.0).sum()))
+                if term:
+                    break
+            runs[backend] = (digest, env.sim.trajectory_hash, scripted, vehicles)
+        finally:
+            env.close()
+    assert runs["native"][0] == runs["python"][0] and runs["native"][1] == runs["python"][1]
+    _, _, scripted, vehicles = runs["native"]
+    assert vehicles >= 3 and scripted[0] > scripted[-1], (vehicles, scripted[0], scripted[-1])

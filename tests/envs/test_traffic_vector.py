@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import os
 import signal
 import threading
@@ -23,8 +24,10 @@ BENCH = str(builtin_root() / "bench" / "town01_sumo_traffic.toml")
 N = 4
 
 
-def make_env() -> gym.Env[Any, Any]:
-    return gym.make("DriveHierarchy-R4", scenario=BENCH, front=None, bev=None, prompt=False)
+def make_env(backend: str = "auto") -> gym.Env[Any, Any]:
+    return gym.make(
+        "DriveHierarchy-R4", scenario=BENCH, front=None, bev=None, prompt=False, sumo_backend=backend
+    )
 
 
 def run(venv: gym.vector.VectorEnv[Any, Any], steps: int) -> list[np.ndarray]:
@@ -37,8 +40,9 @@ def run(venv: gym.vector.VectorEnv[Any, Any], steps: int) -> list[np.ndarray]:
     return states
 
 
-def test_async_vector_env_runs_four_sumo_envs() -> None:
-    venv = gym.vector.AsyncVectorEnv([make_env] * N)
+@pytest.mark.parametrize("backend", ["native", "python"])
+def test_async_vector_env_runs_four_sumo_envs(backend: str) -> None:
+    venv = gym.vector.AsyncVectorEnv([functools.partial(make_env, backend)] * N)
     try:
         a = run(venv, 12)
         b = run(venv, 12)

@@ -44,10 +44,10 @@ def frame(env: DriveHierarchyR4Env) -> tuple[np.ndarray, np.ndarray]:
 
 
 def run_expert(
-    scenario: str | Path, seed: int, steps: int | None = None, traffic: str | None = None
+    scenario: str | Path, seed: int, steps: int | None = None, traffic: str | None = None, **kw: object
 ) -> dict[str, object]:
     """The expert over `scenario`: digests of the traffic and the trajectory, vehicle counts."""
-    env = make_env(scenario) if traffic is None else make_env(scenario, traffic=traffic)
+    env = make_env(scenario, **kw) if traffic is None else make_env(scenario, traffic=traffic, **kw)
     try:
         env.reset(seed=seed)
         digest = hashlib.sha256()

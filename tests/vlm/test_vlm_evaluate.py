@@ -132,7 +132,7 @@ def test_outage_mid_run_aborts_cleanly_and_a_rerun_resumes(tmp_path: Path) -> No
     finished = runner.read_results(out)
     assert list(finished) == ["02_obstacles__town01_cones_right_lane"]  # 50 decisions, then the outage
     (aborted,) = _lines(out / "aborted.jsonl")
-    assert aborted["key"] == "06_traffic_flow__ingolstadt_westbound_flow"
+    assert aborted["key"] == "06_traffic_flow__bs3d_09_left_turner_queue"
     assert aborted["vlm"]["transport_errors"] == 3 and "HTTP 503" in aborted["last_error"]
     assert not (out / "scenes" / "09_yielding__town01_yield_left_turn").exists(), "nothing new after an abort"
     assert not (out / "summary.json").exists()
@@ -175,8 +175,8 @@ def test_seeds_give_keys_intervals_and_reproducible_episodes(tmp_path: Path) -> 
     assert [r["key"] for r in a] == [
         "02_obstacles__town01_cones_right_lane__s0",
         "02_obstacles__town01_cones_right_lane__s1",
-        "06_traffic_flow__ingolstadt_westbound_flow__s0",
-        "06_traffic_flow__ingolstadt_westbound_flow__s1",
+        "06_traffic_flow__bs3d_09_left_turner_queue__s0",
+        "06_traffic_flow__bs3d_09_left_turner_queue__s1",
     ]
     # Same seeds and replies => identical episodes, whatever the concurrency.
     for x, y in zip(a, b, strict=True):

@@ -57,8 +57,15 @@ class R4Config:
     prompt: bool = True
     # Background traffic: "sumo" | "native" | "none"; None = the scenario's `[traffic]` mode.
     traffic: str | None = None
+    # SUMO mode's backend: "native" (libsumo's C++ API driven from Rust, no Python per tick),
+    # "python" (the libsumo module), "auto" = native when built, else python (docs/traffic.md).
+    sumo_backend: str = "auto"
 
     def __post_init__(self) -> None:
+        if self.sumo_backend not in ("auto", "native", "python"):
+            raise ConfigError(
+                f"config `sumo_backend` = {self.sumo_backend!r}: expected 'auto', 'native' or 'python'"
+            )
         if self.traffic not in (None, "sumo", "native", "none"):
             raise ConfigError(
                 f"config `traffic` = {self.traffic!r}: expected 'sumo', 'native', 'none' or None "
@@ -88,6 +95,7 @@ class R4Config:
         d = dataclasses.asdict(self)
         d.pop("scenario")
         d.pop("traffic")  # handled by the Python env (envs/traffic), not the Rust config
+        d.pop("sumo_backend")
         return json.dumps(d)
 
     def replace(self, **changes: Any) -> R4Config:

@@ -26,7 +26,7 @@ import weakref
 from pathlib import Path
 from typing import Any, ClassVar
 
-from drivehierarchy._core import ConfigError, SimulationError
+from drivehierarchy._core import ConfigError, NativeSumo, SimulationError
 
 TRAFFIC_MODES = ("sumo", "native", "none")
 STEP_LENGTH_S = 0.05
@@ -79,7 +79,8 @@ class SumoTraffic:
     # -- lifecycle ----------------------------------------------------------------------------
     def _claim(self) -> None:
         owner = SumoTraffic._owner() if SumoTraffic._owner is not None else None
-        if owner is not None and owner is not self and owner._running:
+        # The native backend (envs/traffic/native.py) shares the one simulation per process.
+        if (owner is not None and owner is not self and owner._running) or NativeSumo.busy():
             raise SimulationError(
                 "libsumo runs one simulation per process and another SUMO env in this process is "
                 "running; close it first, or vectorise SUMO envs over processes "
