@@ -5,9 +5,10 @@ use std::path::Path;
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    /// A scenario file (or a value inside it) is invalid.
-    #[error("{file}: field `{field}` = {value}: {message}")]
-    Scenario { file: String, field: String, value: String, message: String },
+    /// A scenario file (or a value inside it) is invalid. `at` is the 1-based line and column
+    /// of the field in the file (shown as `file:line:column:` like compilers do).
+    #[error("{file}{}: field `{field}` = {value}: {message}", .at.map_or(String::new(), |(l, c)| format!(":{l}:{c}")))]
+    Scenario { file: String, at: Option<(usize, usize)>, field: String, value: String, message: String },
     /// A road network could not be read or lacks what was asked of it.
     #[error("{file}: {message}")]
     Map { file: String, message: String },
@@ -34,9 +35,19 @@ impl Error {
     ) -> Self {
         Error::Scenario {
             file: file.as_ref().display().to_string(),
+            at: None,
             field: field.into(),
             value: value.to_string(),
             message: message.into(),
+        }
+    }
+    /// Sets the line and column of a scenario error (other errors are returned unchanged).
+    pub fn at(self, line: usize, column: usize) -> Self {
+        match self {
+            Error::Scenario { file, field, value, message, .. } => {
+                Error::Scenario { file, at: Some((line, column)), field, value, message }
+            }
+            other => other,
         }
     }
     pub fn map(file: impl AsRef<Path>, message: impl Into<String>) -> Self {

@@ -5,7 +5,7 @@ use crate::geom::{Obb, Pose};
 use serde::{Deserialize, Serialize};
 
 /// Kind of an actor; decides its collider class, its look and how scoring classes a contact.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum ActorKind {
     Car,
@@ -101,7 +101,7 @@ pub struct TrafficLightView {
     pub color: LightColor,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum SignKind {
     Stop,

@@ -31,6 +31,86 @@ fn err_of(tag: &str, edit: impl Fn(String) -> String) -> String {
     e
 }
 
+/// The `line:column` that follows the file name in the error of a broken variant, and the error.
+fn located(tag: &str, edit: impl Fn(String) -> String) -> ((usize, usize), String) {
+    let p = write_variant(tag, edit);
+    let e = Scenario::load(&p).expect_err("must fail").to_string();
+    let rest = e.strip_prefix(&format!("{}:", p.display())).unwrap_or_else(|| panic!("no file: prefix: {e}"));
+    let mut it = rest.splitn(3, ':').map(|n| n.parse::<usize>());
+    match (it.next(), it.next()) {
+        (Some(Ok(l)), Some(Ok(c))) => ((l, c), e),
+        _ => panic!("no file:line:column: prefix: {e}"),
+    }
+}
+
+/// Resolution errors (which need the map) carry the line and column of their field, like
+/// syntax and type errors do. Line numbers refer to `world_fixtures/cross.toml`.
+#[test]
+fn resolution_errors_have_line_and_column() {
+    let cases = [
+        // The value itself: the unknown lane in a lane list.
+        (
+            "lanes = [\"W_in_0\", \"C_E_0\"]",
+            "lanes = [\"W_in_0\", \"C_E_9\"]",
+            "actors[2].route.lanes[1]",
+            (32, 30),
+            "unknown lane",
+        ),
+        // s beyond the lane's end.
+        ("s = 80.0 }", "s = 800.0 }", "ego.destination.s", (11, 37), "beyond the end"),
+        // Destination behind the start: the destination's inline table.
+        (
+            "destination = { lane = \"C_E_0\", s = 80.0 }",
+            "destination = { lane = \"W_in_0\", s = 5.0 }",
+            "ego.destination",
+            (11, 15),
+            "behind",
+        ),
+        // A bad trigger reference.
+        ("of = \"actor_self\"", "of = \"the_ego\"", "actors[0].start.of", (19, 37), "actor_self"),
+        // Both braking conditions: the brake table.
+        (
+            "brake = { at_s = 60.0,",
+            "brake = { at_s = 60.0, after_s = 1.0,",
+            "actors[2].brake",
+            (34, 9),
+            "exactly one",
+        ),
+        // An edge not reachable from the previous one.
+        (
+            "edges = [\"N_in\", \"C_S\"]",
+            "edges = [\"N_in\", \"C_N\"]",
+            "actors[1].route.edges[1]",
+            (24, 28),
+            "not reachable",
+        ),
+        // A key left out: the header of its table.
+        (
+            "route = { edges = [\"N_in\", \"C_S\"] }\n",
+            "",
+            "actors[1].waypoints",
+            (22, 1),
+            "needs `waypoints` or `route`",
+        ),
+        // Unknown keys are serde's errors, located as before.
+        ("color = [10, 200, 10]", "colour = [10, 200, 10]", "actors[2].colour", (35, 1), "unknown field"),
+    ];
+    for (i, (from, to, field, at, msg)) in cases.into_iter().enumerate() {
+        let (got, e) = located(&format!("loc{i}"), |t| {
+            assert!(t.contains(from), "{from}");
+            t.replace(from, to)
+        });
+        assert_eq!(got, at, "{e}");
+        assert!(e.contains(&format!(": field `{field}` = ")) && e.contains(msg), "{e}");
+    }
+    // Fields of `[traffic]` too.
+    let (at, e) = located("traffic", |t| {
+        format!("{t}\n[traffic]\nmode = \"native\"\n\n[[traffic.flows]]\nfrom = \"W_in\"\nto = \"C_E\"\nvehs_per_hour = -5.0\n")
+    });
+    assert_eq!(at, (52, 17), "{e}");
+    assert!(e.contains("traffic.flows[0].vehs_per_hour"), "{e}");
+}
+
 #[test]
 fn fixture_validates_with_summary() {
     let s = validate(fixture_dir().join("cross.toml")).unwrap();
@@ -44,8 +124,8 @@ fn fixture_validates_with_summary() {
 
 #[test]
 fn malformed_toml_has_line_and_column() {
-    let e = err_of("syntax", |t| t.replace("speed_mps = 0.0", "speed_mps = = 0.0"));
-    assert!(e.contains("line 12"), "{e}");
+    let (at, e) = located("syntax", |t| t.replace("speed_mps = 0.0", "speed_mps = = 0.0"));
+    assert_eq!(at.0, 12, "{e}");
 }
 
 #[test]

@@ -22,6 +22,18 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     v.add_argument("files", nargs="+", help="scenario files or folders (every */*.toml and *.toml)")
     v.set_defaults(func=_validate)
 
+    js = cmds.add_parser(
+        "schema",
+        help="print the JSON Schema of scenario files (docs/scenario.schema.json)",
+        description=(
+            "The JSON Schema generated from the Rust types that read scenario files: for editors "
+            "(Taplo / Even Better TOML `#:schema` directive) and other tools. `validate` remains "
+            "the full check (it also needs the map)."
+        ),
+    )
+    js.add_argument("--out", type=Path, help="write it to this file instead of stdout")
+    js.set_defaults(func=_schema)
+
     ls = cmds.add_parser("list", help="list the built-in scenarios, or those of a folder")
     ls.add_argument("dir", nargs="?", type=Path, help="a folder of <category>/<name>.toml files")
     ls.add_argument("--json", action="store_true", help="one JSON object per line")
@@ -113,6 +125,19 @@ def _validate(args: argparse.Namespace) -> int:
             continue
         print(f"ok {f}: {json.dumps(summary, sort_keys=True)}")
     return 1 if bad else 0
+
+
+def _schema(args: argparse.Namespace) -> int:
+    text = _core.scenario_json_schema()
+    if args.out is None:
+        print(text, end="")
+        return 0
+    try:
+        args.out.write_text(text, encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"--out {args.out}: cannot write: {exc}") from exc
+    print(args.out)
+    return 0
 
 
 def _probe(args: argparse.Namespace) -> int:

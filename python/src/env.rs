@@ -433,6 +433,12 @@ pub fn validate_scenario(py: Python<'_>, path: &str, sumo_home: Option<PathBuf>)
     serde_json::to_string(&s).map_err(|e| err(py, dh_env::Error::Simulation(e.to_string())))
 }
 
+/// The JSON Schema of scenario files (generated from the Rust types), pretty-printed.
+#[pyfunction]
+pub fn scenario_json_schema() -> String {
+    dh_env::scenario::scenario_json_schema_string()
+}
+
 /// The default configs as JSON (what `R4Config` mirrors).
 #[pyfunction]
 pub fn default_sim_config() -> String {
@@ -446,6 +452,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("NATIVE_SUMO_SHIM", crate::sumo_native::SHIM_FILE)?;
     m.add_function(wrap_pyfunction!(rescore, m)?)?;
     m.add_function(wrap_pyfunction!(validate_scenario, m)?)?;
+    m.add_function(wrap_pyfunction!(scenario_json_schema, m)?)?;
     m.add_function(wrap_pyfunction!(default_sim_config, m)?)?;
     m.add("STATE_FIELDS", dh_env::sim::STATE_FIELDS.to_vec())?;
     Ok(())

@@ -1,17 +1,19 @@
 //! Scenario files (TOML, schema v1 — see `docs/scenario-format.md`): parsing with precise
 //! errors, and resolution against the map into world-frame geometry ([`ResolvedScenario`]).
 
+pub mod json_schema;
 pub mod parse;
 pub mod resolve;
 pub mod schema;
 pub mod traffic;
 
+pub use json_schema::{scenario_json_schema, scenario_json_schema_string};
 pub use parse::{parse_scenario_file, parse_scenario_str};
 pub use resolve::{
     default_size, default_speed_mps, discover_sumo_home, offset_polyline, resolve_map_path, vclass_of,
-    ActorMotion, AtEnd, BrakeEvent, BrakeWhen, LoadOptions, MapCache, ResolvedActor, ResolvedEgo,
-    ResolvedScenario, ScriptedPath, Trigger, DEFAULT_REFERENCE_SPEED_MPS, EGO_COLOR, PALETTE,
-    SNAP_DISTANCE_M, SUMO_PREFIX,
+    ActorMotion, AtEnd, BrakeEvent, BrakeWhen, ChainEvent, LightProgram, LoadOptions, MapCache,
+    ResolvedActor, ResolvedEgo, ResolvedScenario, ScriptedPath, Trigger, DEFAULT_REFERENCE_SPEED_MPS,
+    EGO_COLOR, ETA_MAX_OFFSET_M, ETA_MIN_SPEED_MPS, PALETTE, SNAP_DISTANCE_M, SUMO_PREFIX,
 };
 pub use schema::{ScenarioFile, CATEGORIES, SCENARIO_VERSION};
 pub use traffic::{TrafficDemand, TrafficMode};
@@ -33,8 +35,10 @@ impl Scenario {
 
     pub fn load_with(path: impl AsRef<Path>, opts: &LoadOptions) -> Result<ResolvedScenario> {
         let path = path.as_ref();
-        let spec = parse_scenario_file(path)?;
-        resolve::resolve(path, &spec, opts)
+        let text = parse::read_scenario_text(path)?;
+        let spec = parse_scenario_str(path, &text)?;
+        // Resolution errors name a TOML path; add where it is written in the file.
+        resolve::resolve(path, &spec, opts).map_err(|e| parse::locate(e, path, &text))
     }
 }
 

@@ -6,6 +6,7 @@
 
 use crate::view::{ActorKind, SignKind};
 use crate::world::VehicleParams;
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// Highest schema version this build reads.
@@ -25,8 +26,9 @@ pub const CATEGORIES: [&str; 10] = [
     "10_roundabout",
 ];
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = crate::scenario::json_schema::file_constraints)]
 pub struct ScenarioFile {
     pub version: u32,
     pub id: String,
@@ -56,13 +58,17 @@ pub struct ScenarioFile {
     /// Background traffic (`[traffic]`, see `docs/traffic.md`).
     #[serde(default)]
     pub traffic: Option<crate::scenario::traffic::TrafficSpec>,
+    /// Traffic-light program overrides (`[[lights]]`), applied in every traffic mode.
+    #[serde(default)]
+    pub lights: Vec<LightOverrideSpec>,
 }
 
 /// A point (and optionally a heading) either on a lane (`lane` + `s` + `offset_m`) or in
 /// network coordinates (`x`, `y`). `offset_m` > 0 is left of the lane direction;
 /// `yaw_deg` (counter-clockwise from east) overrides the lane heading.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = crate::scenario::json_schema::place_alternatives)]
 pub struct PlaceSpec {
     #[serde(default)]
     pub lane: Option<String>,
@@ -78,8 +84,9 @@ pub struct PlaceSpec {
     pub yaw_deg: Option<f64>,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = crate::scenario::json_schema::ego_alternatives)]
 pub struct EgoSpec {
     #[serde(default)]
     pub start: Option<PlaceSpec>,
@@ -97,7 +104,7 @@ pub struct EgoSpec {
     pub vehicle: Option<VehicleParams>,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ObstacleSpec {
     #[serde(default)]
@@ -114,7 +121,7 @@ pub struct ObstacleSpec {
     pub color: Option<[u8; 3]>,
 }
 
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum BehaviorSpec {
     /// Follows its path at its speeds once triggered.
@@ -124,7 +131,7 @@ pub enum BehaviorSpec {
     External,
 }
 
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum AtEndSpec {
     /// Stays at the end of its path.
@@ -135,8 +142,9 @@ pub enum AtEndSpec {
 }
 
 /// One point of a waypoint path; `speed_mps` is the speed on the leg that arrives here.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = crate::scenario::json_schema::place_alternatives)]
 pub struct WaypointSpec {
     #[serde(default)]
     pub lane: Option<String>,
@@ -154,8 +162,9 @@ pub struct WaypointSpec {
 
 /// A path along lanes: `edges` (gaps routed) or an explicit `lanes` list (junction internal
 /// lanes inserted automatically), cut to [`start_s`, `end_s`] along the route.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = crate::scenario::json_schema::route_alternatives)]
 pub struct RouteSpec {
     #[serde(default)]
     pub edges: Option<Vec<String>>,
@@ -174,8 +183,9 @@ pub struct RouteSpec {
 }
 
 /// What the `of` of a distance trigger refers to.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(untagged)]
+#[schemars(transform = crate::scenario::json_schema::of_alternatives)]
 pub enum OfSpec {
     Point([f64; 2]),
     /// Only `"actor_self"`: the actor's own start position.
@@ -184,8 +194,9 @@ pub enum OfSpec {
 }
 
 /// Start trigger: exactly one of `time_s` or `ego_within_m` (+ `of`, default `"actor_self"`).
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = crate::scenario::json_schema::trigger_alternatives)]
 pub struct TriggerSpec {
     #[serde(default)]
     pub time_s: Option<f64>,
@@ -193,12 +204,76 @@ pub struct TriggerSpec {
     pub ego_within_m: Option<f64>,
     #[serde(default)]
     pub of: Option<OfSpec>,
+    /// Time-to-conflict trigger: fires when the ego is expected to reach the projection of `of`
+    /// on its route within this many seconds (route distance ÷ max(ego speed, 0.5 m/s)).
+    #[serde(default)]
+    pub ego_eta_s: Option<f64>,
+    /// Chained trigger: name of the actor whose `event` this one follows.
+    #[serde(default)]
+    pub after: Option<String>,
+    /// Chained trigger: seconds after the other actor's event (default 0).
+    #[serde(default)]
+    pub delay_s: Option<f64>,
+    /// Chained trigger: which event of the other actor (default `start`).
+    #[serde(default)]
+    pub event: Option<ChainEventSpec>,
+}
+
+/// What a chained trigger follows.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ChainEventSpec {
+    /// The other actor's start trigger fired.
+    #[default]
+    Start,
+    /// The other actor began its brake event.
+    Brake,
+    /// The other actor reached the end of its path.
+    End,
+}
+
+/// A lane change of a `route` actor: from arc length `at_s` along its path it moves over
+/// `length_m` into `to_lane`, a neighbour lane of the edge it is on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LaneChangeSpec {
+    pub at_s: f64,
+    pub to_lane: String,
+    /// Length of the manoeuvre along the path (default 20 m).
+    #[serde(default)]
+    pub length_m: Option<f64>,
+}
+
+/// One phase of a replacement light program.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LightPhaseSpec {
+    /// SUMO state string, one character per link index.
+    pub state: String,
+    pub duration_s: f64,
+}
+
+/// `[[lights]]`: override of one traffic light's program: `offset_s` shifts it, `start_phase`
+/// (+ `phase_elapsed_s`) sets where it is at t = 0, `phases` replaces it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LightOverrideSpec {
+    pub tls: String,
+    #[serde(default)]
+    pub offset_s: Option<f64>,
+    #[serde(default)]
+    pub start_phase: Option<usize>,
+    #[serde(default)]
+    pub phase_elapsed_s: Option<f64>,
+    #[serde(default)]
+    pub phases: Option<Vec<LightPhaseSpec>>,
 }
 
 /// A hard-braking event: once at arc length `at_s` of the path, or `after_s` seconds after the
 /// trigger, decelerate at `decel_mps2` to `to_speed_mps`; resume after `hold_s` if given.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = crate::scenario::json_schema::brake_alternatives)]
 pub struct BrakeSpec {
     #[serde(default)]
     pub at_s: Option<f64>,
@@ -211,8 +286,9 @@ pub struct BrakeSpec {
     pub hold_s: Option<f64>,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = crate::scenario::json_schema::actor_alternatives)]
 pub struct ActorSpec {
     #[serde(default)]
     pub name: Option<String>,
@@ -250,9 +326,12 @@ pub struct ActorSpec {
     pub height_m: Option<f64>,
     #[serde(default)]
     pub color: Option<[u8; 3]>,
+    /// Lane changes / cut-ins of a `route` actor, in path order.
+    #[serde(default)]
+    pub lane_changes: Vec<LaneChangeSpec>,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SignSpec {
     pub kind: SignKind,

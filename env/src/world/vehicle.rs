@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 pub use crate::drive::Control;
 
 /// Ego vehicle parameters. Units are in the names; angles in degrees where noted.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct VehicleParams {
     pub length_m: f64,

@@ -1,0 +1,232 @@
+//! JSON Schema of the scenario file, generated from the serde types of [`super::schema`] and
+//! [`super::traffic`] with `schemars` (committed as `docs/scenario.schema.json`; editors use it
+//! for completion and checks, e.g. Taplo's `#:schema` directive).
+//!
+//! What serde accepts is the base (every table `additionalProperties: false`, defaults,
+//! descriptions from the doc comments). TOML has no null, so the `null` that `Option` adds is
+//! dropped. The alternatives that the Rust types keep as flat optional fields (so that the
+//! resolver can name the wrong field) are added as `oneOf`/`not` constraints by the transforms
+//! below; the resolver stays the authority on values that need the map.
+
+use super::schema::{ScenarioFile, CATEGORIES, SCENARIO_VERSION};
+use schemars::generate::SchemaSettings;
+use schemars::transform::{transform_subschemas, Transform};
+use schemars::Schema;
+use serde_json::{json, Map, Value};
+
+/// `$id` of the published schema (repo-relative file name).
+pub const SCHEMA_ID: &str = "scenario.schema.json";
+
+/// The scenario-file JSON Schema (draft 07, which Taplo / Even Better TOML and the Python
+/// `jsonschema` package read).
+pub fn scenario_json_schema() -> Value {
+    // DropNull first: draft 07's own transforms then move `$ref` siblings into `allOf`.
+    let generator =
+        SchemaSettings::draft07().with(|s| s.transforms.insert(0, Box::new(DropNull))).into_generator();
+    let mut schema = generator.into_root_schema_for::<ScenarioFile>();
+    schema.insert("$id".into(), json!(SCHEMA_ID));
+    schema.insert(
+        "title".into(),
+        json!(format!("DriveHierarchy R4 scenario file (version {SCENARIO_VERSION})")),
+    );
+    schema.insert("description".into(), json!("One R4 scenario in TOML; see docs/scenario-format.md."));
+    schema.to_value()
+}
+
+/// [`scenario_json_schema`] as pretty JSON with a trailing newline (the committed file).
+pub fn scenario_json_schema_string() -> String {
+    let mut s = serde_json::to_string_pretty(&scenario_json_schema()).expect("a JSON value serialises");
+    s.push('\n');
+    s
+}
+
+/// Removes `null` from `Option` fields (`type: [T, "null"]`, `anyOf: [T, {type: null}]`,
+/// `default: null`): a TOML key is either absent or has a value.
+#[derive(Debug, Clone)]
+struct DropNull;
+
+impl Transform for DropNull {
+    fn transform(&mut self, schema: &mut Schema) {
+        transform_subschemas(self, schema);
+        let Some(obj) = schema.as_object_mut() else { return };
+        if obj.get("default") == Some(&Value::Null) {
+            obj.remove("default");
+        }
+        if let Some(Value::Array(types)) = obj.get_mut("type") {
+            types.retain(|t| *t != "null");
+            if types.len() == 1 {
+                let t = types.remove(0);
+                obj.insert("type".into(), t);
+            }
+        }
+        if let Some(Value::Array(alts)) = obj.get_mut("anyOf") {
+            alts.retain(|a| a.get("type") != Some(&json!("null")));
+            if alts.len() == 1 {
+                let only = alts.remove(0);
+                obj.remove("anyOf");
+                match only {
+                    Value::Object(m) => {
+                        for (k, v) in m {
+                            obj.entry(k).or_insert(v);
+                        }
+                    }
+                    other => {
+                        obj.insert("allOf".into(), json!([other]));
+                    }
+                }
+            }
+        }
+    }
+}
+
+fn obj(schema: &mut Schema) -> &mut Map<String, Value> {
+    schema.ensure_object()
+}
+
+fn required(keys: &[&str]) -> Value {
+    json!({ "required": keys })
+}
+
+/// A schema that fails when any of `keys` is present.
+fn none_of(keys: &[&str]) -> Value {
+    json!({ "not": { "anyOf": keys.iter().map(|k| required(&[*k])).collect::<Vec<_>>() } })
+}
+
+fn push_all_of(schema: &mut Schema, v: Value) {
+    let o = obj(schema);
+    match o.get_mut("allOf") {
+        Some(Value::Array(a)) => a.push(v),
+        _ => {
+            o.insert("allOf".into(), json!([v]));
+        }
+    }
+}
+
+/// A place: `lane` (+ `s`, `offset_m`) or both `x` and `y`, never both forms.
+pub(crate) fn place_alternatives(schema: &mut Schema) {
+    push_all_of(
+        schema,
+        json!({ "oneOf": [
+            { "allOf": [required(&["lane"]), none_of(&["x", "y"])] },
+            { "allOf": [required(&["x", "y"]), none_of(&["lane", "s", "offset_m"])] },
+        ]}),
+    );
+}
+
+/// Start trigger: `time_s`, or `ego_within_m` with an optional `of`.
+pub(crate) fn trigger_alternatives(schema: &mut Schema) {
+    push_all_of(
+        schema,
+        json!({ "oneOf": [
+            { "allOf": [required(&["time_s"]), none_of(&["ego_within_m", "of"])] },
+            { "allOf": [required(&["ego_within_m"]), none_of(&["time_s"])] },
+        ]}),
+    );
+}
+
+/// Restricts the string alternative of an untagged enum to `names`.
+fn string_names(schema: &mut Schema, names: &[&str]) {
+    if let Some(Value::Array(alts)) = obj(schema).get_mut("anyOf") {
+        for a in alts.iter_mut() {
+            if a.get("type") == Some(&json!("string")) {
+                a["enum"] = json!(names);
+            }
+        }
+    }
+}
+
+/// `of` of a distance trigger: the only name is `"actor_self"`.
+pub(crate) fn of_alternatives(schema: &mut Schema) {
+    string_names(schema, &["actor_self"]);
+}
+
+/// `depart_lane`: an index or one of SUMO's names.
+pub(crate) fn lane_names(schema: &mut Schema) {
+    string_names(schema, &super::traffic::LANE_NAMES);
+}
+
+/// `depart_speed`: m/s or one of SUMO's names.
+pub(crate) fn speed_names(schema: &mut Schema) {
+    string_names(schema, &super::traffic::SPEED_NAMES);
+}
+
+/// Braking: exactly one of `at_s` and `after_s`.
+pub(crate) fn brake_alternatives(schema: &mut Schema) {
+    push_all_of(schema, json!({ "oneOf": [required(&["at_s"]), required(&["after_s"])] }));
+}
+
+/// Lane path: exactly one of `edges` and `lanes`; `start_lane` only with `edges`.
+pub(crate) fn route_alternatives(schema: &mut Schema) {
+    push_all_of(
+        schema,
+        json!({ "oneOf": [
+            { "allOf": [required(&["edges"]), none_of(&["lanes"])] },
+            { "allOf": [required(&["lanes"]), none_of(&["edges", "start_lane"])] },
+        ]}),
+    );
+}
+
+/// Actor: `external` actors stand `at` a place; scripted ones follow `waypoints` or a `route`.
+pub(crate) fn actor_alternatives(schema: &mut Schema) {
+    push_all_of(
+        schema,
+        json!({
+            "if": { "required": ["behavior"], "properties": { "behavior": { "const": "external" } } },
+            "then": { "allOf": [required(&["at"]), none_of(&["waypoints", "route"])] },
+            "else": { "allOf": [
+                none_of(&["at"]),
+                { "oneOf": [
+                    { "allOf": [required(&["waypoints"]), none_of(&["route"])] },
+                    { "allOf": [required(&["route"]), none_of(&["waypoints"])] },
+                ]},
+            ]},
+        }),
+    );
+}
+
+/// Ego: a `destination` or `route_edges` (or both).
+pub(crate) fn ego_alternatives(schema: &mut Schema) {
+    push_all_of(schema, json!({ "anyOf": [required(&["destination"]), required(&["route_edges"])] }));
+}
+
+/// Flow: exactly one of `vehs_per_hour` and `probability`.
+pub(crate) fn flow_alternatives(schema: &mut Schema) {
+    push_all_of(schema, json!({ "oneOf": [required(&["vehs_per_hour"]), required(&["probability"])] }));
+}
+
+/// Top level: the version this build reads and the ten category names.
+pub(crate) fn file_constraints(schema: &mut Schema) {
+    if let Some(Value::Object(props)) = obj(schema).get_mut("properties") {
+        if let Some(Value::Object(v)) = props.get_mut("version") {
+            v.insert("const".into(), json!(SCENARIO_VERSION));
+        }
+        if let Some(Value::Object(c)) = props.get_mut("category") {
+            c.insert("enum".into(), json!(CATEGORIES));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tables_reject_unknown_keys_and_options_are_not_nullable() {
+        let s = scenario_json_schema();
+        assert_eq!(s["additionalProperties"], json!(false));
+        assert_eq!(s["definitions"]["PlaceSpec"]["additionalProperties"], json!(false));
+        assert_eq!(s["definitions"]["TrafficSpec"]["additionalProperties"], json!(false));
+        assert!(!scenario_json_schema_string().contains("\"null\""), "TOML has no null");
+        assert_eq!(s["properties"]["version"]["const"], json!(SCENARIO_VERSION));
+    }
+
+    #[test]
+    fn committed_schema_is_current() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/scenario.schema.json");
+        let committed = std::fs::read_to_string(&path).unwrap_or_default();
+        assert!(
+            committed == scenario_json_schema_string(),
+            "docs/scenario.schema.json is stale: `drivehierarchy scenario schema --out docs/scenario.schema.json`"
+        );
+    }
+}
