@@ -144,6 +144,27 @@ def _edits() -> list[tuple[str, Any, str]]:
     def bad_lane_name(d: dict[str, Any]) -> None:
         d["traffic"] = {"vehicles": [{"route": ["C2T"], "depart_lane": "leftmost"}]}
 
+    def eta_and_after(d: dict[str, Any]) -> None:
+        d["actors"][1]["start"] = {"ego_eta_s": 3.0, "of": [200.0, -4.8], "after": "x"}
+
+    def delay_without_after(d: dict[str, Any]) -> None:
+        d["actors"][1]["start"] = {"time_s": 1.0, "delay_s": 1.0}
+
+    def bad_event(d: dict[str, Any]) -> None:
+        d["actors"][1]["start"] = {"after": "actors[0]", "event": "stop"}
+
+    def lane_change_unknown_key(d: dict[str, Any]) -> None:
+        d["actors"][1]["lane_changes"] = [{"at_s": 5.0, "lane": "C2T_1"}]
+
+    def light_offset_and_phase(d: dict[str, Any]) -> None:
+        d["lights"] = [{"tls": "C", "offset_s": 3.0, "start_phase": 1}]
+
+    def light_nothing(d: dict[str, Any]) -> None:
+        d["lights"] = [{"tls": "C"}]
+
+    def light_elapsed_alone(d: dict[str, Any]) -> None:
+        d["lights"] = [{"tls": "C", "offset_s": 3.0, "phase_elapsed_s": 1.0}]
+
     return [
         ("unknown top-level key", unknown_top, ": Additional properties are not allowed ('colour'"),
         ("unknown nested key", unknown_nested, "actors.0.brake: Additional properties"),
@@ -160,7 +181,30 @@ def _edits() -> list[tuple[str, Any, str]]:
         ("colour component", bad_color, "actors.0.color.0: 300 is greater"),
         ("flow rate twice", bad_flow, "traffic.flows.0: "),
         ("depart_lane name", bad_lane_name, "traffic.vehicles.0.depart_lane: "),
+        ("ego_eta_s and after", eta_and_after, "actors.1.start: "),
+        ("delay_s without after", delay_without_after, "actors.1.start: "),
+        ("chain event name", bad_event, "actors.1.start.event: 'stop'"),
+        ("lane change unknown key", lane_change_unknown_key, "actors.1.lane_changes.0: Additional"),
+        ("light offset and start phase", light_offset_and_phase, "lights.0: "),
+        ("light without override", light_nothing, "lights.0: "),
+        ("phase_elapsed_s without start_phase", light_elapsed_alone, "lights.0: "),
     ]
+
+
+def test_schema_accepts_the_new_features(schema: dict[str, Any]) -> None:
+    d = _base()
+    d["actors"][0]["start"] = {"ego_eta_s": 3.0, "of": [200.0, -4.8]}
+    d["actors"][1]["start"] = {"after": "actors[0]", "delay_s": 1.0, "event": "brake"}
+    d["actors"][1]["lane_changes"] = [{"at_s": 40.0, "to_lane": "C2T_1", "length_m": 20.0}]
+    d["lights"] = [
+        {"tls": "C", "start_phase": 3, "phase_elapsed_s": 5.0},
+        {"tls": "D", "phases": [{"state": "GGrr", "duration_s": 30.0}], "offset_s": 2.0},
+    ]
+    d["traffic"] = {
+        "vehicles": [{"route": ["C2T"], "max_speed_mps": 6.0, "speed_factor": 0.8}],
+        "flows": [{"from": "C2T", "to": "T2E", "vehs_per_hour": 300, "number": 3, "speed_factor": 1.1}],
+    }
+    assert errors(schema, d) == []
 
 
 @pytest.mark.parametrize("case", _edits(), ids=lambda c: c[0])

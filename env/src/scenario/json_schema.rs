@@ -113,15 +113,30 @@ pub(crate) fn place_alternatives(schema: &mut Schema) {
     );
 }
 
-/// Start trigger: `time_s`, or `ego_within_m` with an optional `of`.
+/// Start trigger: exactly one of `time_s`, `ego_within_m` / `ego_eta_s` (with an optional
+/// `of`) and `after` (with optional `delay_s`, `event`).
 pub(crate) fn trigger_alternatives(schema: &mut Schema) {
+    let chain = ["after", "delay_s", "event"];
     push_all_of(
         schema,
         json!({ "oneOf": [
-            { "allOf": [required(&["time_s"]), none_of(&["ego_within_m", "of"])] },
-            { "allOf": [required(&["ego_within_m"]), none_of(&["time_s"])] },
+            { "allOf": [required(&["time_s"]), none_of(&["ego_within_m", "ego_eta_s", "of", "after", "delay_s", "event"])] },
+            { "allOf": [required(&["ego_within_m"]), none_of(&["time_s", "ego_eta_s"]), none_of(&chain)] },
+            { "allOf": [required(&["ego_eta_s"]), none_of(&["time_s", "ego_within_m"]), none_of(&chain)] },
+            { "allOf": [required(&["after"]), none_of(&["time_s", "ego_within_m", "ego_eta_s", "of"])] },
         ]}),
     );
+}
+
+/// Light override: at least one of `offset_s`, `start_phase`, `phases`; `offset_s` and
+/// `start_phase` exclude each other; `phase_elapsed_s` needs `start_phase`.
+pub(crate) fn light_alternatives(schema: &mut Schema) {
+    push_all_of(
+        schema,
+        json!({ "anyOf": [required(&["offset_s"]), required(&["start_phase"]), required(&["phases"])] }),
+    );
+    push_all_of(schema, json!({ "not": required(&["offset_s", "start_phase"]) }));
+    push_all_of(schema, json!({ "if": required(&["phase_elapsed_s"]), "then": required(&["start_phase"]) }));
 }
 
 /// Restricts the string alternative of an untagged enum to `names`.

@@ -220,7 +220,7 @@ pub struct TriggerSpec {
 }
 
 /// What a chained trigger follows.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum ChainEventSpec {
     /// The other actor's start trigger fired.
@@ -234,7 +234,7 @@ pub enum ChainEventSpec {
 
 /// A lane change of a `route` actor: from arc length `at_s` along its path it moves over
 /// `length_m` into `to_lane`, a neighbour lane of the edge it is on.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LaneChangeSpec {
     pub at_s: f64,
@@ -245,7 +245,7 @@ pub struct LaneChangeSpec {
 }
 
 /// One phase of a replacement light program.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LightPhaseSpec {
     /// SUMO state string, one character per link index.
@@ -255,8 +255,9 @@ pub struct LightPhaseSpec {
 
 /// `[[lights]]`: override of one traffic light's program: `offset_s` shifts it, `start_phase`
 /// (+ `phase_elapsed_s`) sets where it is at t = 0, `phases` replaces it.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = crate::scenario::json_schema::light_alternatives)]
 pub struct LightOverrideSpec {
     pub tls: String,
     #[serde(default)]
