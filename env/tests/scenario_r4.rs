@@ -292,26 +292,9 @@ fn drive(s: &ResolvedScenario, careful: bool, bridge: bool) -> Outcome {
     }
 }
 
-#[test]
-fn every_scenario_is_drivable() {
-    let mut failures = Vec::new();
-    for s in load_all() {
-        let o = drive(&s, true, true);
-        eprintln!(
-            "{:40} {:>40} t = {:5.1} s travel {:5.1} m / L {:5.1} m  S_R4 = {:.2}",
-            s.id,
-            o.reason,
-            o.time_s,
-            o.travel_m,
-            s.route_length_m(),
-            o.s_r4
-        );
-        if !o.reached || o.s_r4 < 90.0 {
-            failures.push(format!("{}: {o:?}", s.id));
-        }
-    }
-    assert!(failures.is_empty(), "{failures:#?}");
-}
+// Solvability of the suite is checked with the privileged expert, which also swerves around
+// obstacles and waits for gaps: `agents/tests/expert_r4.rs` (every scenario, no live traffic) and
+// `tests/scenarios/test_suite.py` (every scenario with its own traffic, through the env).
 
 /// The hazard scenarios must actually be hazardous: the same driver blind to actors crashes.
 #[test]
