@@ -2,6 +2,8 @@
 
     python scripts/bench_suite_load.py [FOLDER_OR_FILE ...] [--repeat 5] [--no-sumo] [--jobs 1]
 
+(≈ 4 s per SUMO scenario and 1 s per other scenario at --repeat 5.)
+
 Default: the built-in suite (`scenarios/r4`). The issue's budget: loading any suite scenario and
 resetting it takes ≤ 50 ms without SUMO and ≤ 300 ms with SUMO start.
 
@@ -13,10 +15,12 @@ starts — those are once-per-process costs and printed on their own:
   + `reset()`; cold = the first one in the process (the map is parsed), warm = the median of
   `--repeat` more (map cached). The cold surplus is split into the map's parse (timed on a fresh
   copy of the net in the warm process) and the first env's other set-up (init).
-* SUMO (scenarios whose `[traffic]` runs SUMO): the same with the scenario's traffic; every
-  reset starts SUMO afresh (libsumo) and runs the warm-up. The SUMO time is split into
-  `libsumo.start` (SUMO loading the net and the routes), the warm-up's steps and moves, and the
-  rest (our map, demand, subscriptions).
+* SUMO (scenarios whose `[traffic]` runs SUMO): the same with the scenario's traffic, on each
+  SUMO backend: `native` (SUMO's C++ library driven from Rust, the env's default when built; its
+  first start in a process loads libsumocpp) and `python` (libsumo). Every reset starts SUMO
+  afresh and runs the warm-up. The Python backend's time is split into `libsumo.start` (SUMO
+  loading the net and the routes), the warm-up's steps and moves, and the rest (our map, demand,
+  subscriptions); the native backend does the same SUMO work.
 
 Printed: one line per scenario, max / p50 per scenario class (map × traffic mode), the budget
 ratios (measured / budget; > 1 is over), and highway-env's `highway-v0` `gym.make` + `reset()`
@@ -49,12 +53,14 @@ BUDGET_SUMO_MS = 300.0
 
 
 # -- workers (each call runs in a fresh process) -----------------------------------------------
-def _time_reset(scenario: str, traffic: str, after: Any = None) -> tuple[float, float]:
+def _time_reset(scenario: str, traffic: str, after: Any = None, backend: str = "auto") -> tuple[float, float]:
     """(construct ms, reset ms) of one env; `after()` runs before it is closed (untimed)."""
     from drivehierarchy.envs.r4 import DriveHierarchyR4Env
 
     t0 = time.perf_counter()
-    env = DriveHierarchyR4Env(scenario, front=None, bev=None, prompt=False, traffic=traffic)
+    env = DriveHierarchyR4Env(
+        scenario, front=None, bev=None, prompt=False, traffic=traffic, sumo_backend=backend
+    )
     t1 = time.perf_counter()
     try:
         env.reset(seed=0)
@@ -144,7 +150,8 @@ def _collect(clock: _Clock, into: dict[str, float]) -> None:
     into.update(clock.take())
 
 
-def worker_sumo(scenario: str, repeat: int) -> dict[str, Any]:
+def worker_sumo_python(scenario: str, repeat: int) -> dict[str, Any]:
+    """The Python backend (libsumo), its SUMO time split by wrapping libsumo's calls."""
     t0 = time.perf_counter()
     import drivehierarchy.envs.r4  # noqa: F401
 
@@ -160,7 +167,9 @@ def worker_sumo(scenario: str, repeat: int) -> dict[str, Any]:
     for _ in range(1 + repeat):
         parts: dict[str, float] = {}
         clock.take()
-        construct, reset = _time_reset(scenario, "sumo", after=functools.partial(_collect, clock, parts))
+        construct, reset = _time_reset(
+            scenario, "sumo", after=functools.partial(_collect, clock, parts), backend="python"
+        )
         total = construct + reset
         start, warmup = parts.get("start", 0.0), parts.get("step", 0.0) + parts.get("move", 0.0)
         runs.append({"total": total, "start": start, "warmup": warmup, "other": total - start - warmup})
@@ -179,6 +188,15 @@ def worker_sumo(scenario: str, repeat: int) -> dict[str, Any]:
         "warmup_ms": med("warmup"),
         "other_ms": med("other"),
     }
+
+
+def worker_sumo_native(scenario: str, repeat: int) -> dict[str, Any]:
+    """The native backend (the env's default when built): SUMO's C++ library driven from Rust.
+    Its first start in a process loads libsumocpp (part of cold)."""
+    import drivehierarchy.envs.r4  # noqa: F401
+
+    runs = [sum(_time_reset(scenario, "sumo", backend="native")) for _ in range(1 + repeat)]
+    return {"cold_ms": runs[0], "warm_ms": statistics.median(runs[1:])}
 
 
 def worker_highway(repeat: int) -> dict[str, Any] | None:
@@ -230,7 +248,20 @@ def describe(path: Path) -> tuple[str, str]:
 
 
 def fmt(v: float | None) -> str:
-    return "–" if v is None else f"{v:7.1f}"
+    return "      –" if v is None else f"{v:7.1f}"
+
+
+def maxp50(vals: list[float]) -> str:
+    return f"{max(vals):7.1f} {statistics.median(vals):7.1f}" if vals else f"{'–':>7s} {'–':>7s}"
+
+
+def budget_line(label: str, budget: float, res: dict[Path, dict[str, Any]]) -> None:
+    cold = [r["cold_ms"] for r in res.values()]
+    warm = [r["warm_ms"] for r in res.values()]
+    print(
+        f"  {label:34s} ≤ {budget:3.0f} ms: cold max {max(cold):6.1f} ms = {max(cold) / budget:.2f}x, "
+        f"p50 {statistics.median(cold):6.1f} ms; warm max {max(warm):6.1f} ms = {max(warm) / budget:.2f}x"
+    )
 
 
 def main() -> None:
@@ -245,134 +276,131 @@ def main() -> None:
 
     files = scenario_files(args.targets or [str(builtin_root() / "r4")])
     info = {f: describe(f) for f in files}
+    with_sumo = [] if args.no_sumo else [f for f in files if info[f][1] == "sumo"]
     ctx = mp.get_context("spawn")
+    failed: dict[Path, list[str]] = defaultdict(list)
     # One task per process: every series starts process-cold.
     with ProcessPoolExecutor(max_workers=max(1, args.jobs), mp_context=ctx, max_tasks_per_child=1) as pool:
         peer_f = pool.submit(worker_highway, args.repeat)
         plain = {f: pool.submit(worker_no_sumo, str(f), args.repeat) for f in files}
-        sumo = {}
-        if not args.no_sumo:
-            sumo = {f: pool.submit(worker_sumo, str(f), args.repeat) for f in files if info[f][1] == "sumo"}
-        failed: dict[Path, str] = {}
+        native = {f: pool.submit(worker_sumo_native, str(f), args.repeat) for f in with_sumo}
+        python = {f: pool.submit(worker_sumo_python, str(f), args.repeat) for f in with_sumo}
 
         def collect(futures: dict[Path, Any], what: str) -> dict[Path, dict[str, Any]]:
             out = {}
             for f, fu in futures.items():
                 try:
                     out[f] = fu.result()
-                except Exception as exc:  # a scenario that does not load is reported, not timed
-                    failed[f] = f"{what}: {type(exc).__name__}: {exc}"
+                except Exception as exc:  # reported, not timed (a broken scenario, no native build)
+                    failed[f].append(f"{what}: {type(exc).__name__}: {exc}")
             return out
 
         res_plain = collect(plain, "no SUMO")
-        res_sumo = collect(sumo, "SUMO")
+        res_native = collect(native, "SUMO native")
+        res_python = collect(python, "SUMO python")
         peer = peer_f.result()
     if failed:
-        print("could not time (left out below):", file=sys.stderr)
-        for f, msg in failed.items():
-            print(f"  {f}: {msg}", file=sys.stderr)
-        files = [f for f in files if f in res_plain]
-        res_sumo = {f: r for f, r in res_sumo.items() if f in res_plain}
-        if not files:
-            raise SystemExit("no scenario could be timed")
+        print("could not time (left out of that series):", file=sys.stderr)
+        for f, msgs in failed.items():
+            for m in msgs:
+                print(f"  {f}: {m}", file=sys.stderr)
+    files = [f for f in files if f in res_plain]
+    if not files:
+        raise SystemExit("no scenario could be timed")
 
     root = files[0].parent.parent if len(files) > 1 else files[0].parent
-    print(f"{len(files)} scenarios under {root}; times in ms (wall), warm = median of {args.repeat}\n")
-    head = (
-        f"{'scenario':52s} {'map':24s} {'cold':>7s} {'warm':>7s} {'parse':>7s} {'init':>7s} │ "
-        f"{'S cold':>7s} {'S warm':>7s} {'start':>7s} {'warmup':>7s} {'other':>7s}"
-    )
+    print(f"{len(files)} scenarios under {root}; times in ms (wall), warm = median of {args.repeat}")
     print(
-        "no SUMO: construct + reset (traffic='none'); parse = the map alone (a fresh copy in a warm "
-        "process), init = the rest of the first env's extra time │ S = with the scenario's SUMO "
-        "traffic: start = libsumo.start, warmup = the warm-up's steps and moves (warm medians)"
+        "no SUMO: construct + reset with traffic='none'; parse = the map alone (a fresh copy timed in a "
+        "warm process), init = the rest of the first env's surplus.\n"
+        "SUMO native / python: the same with the scenario's SUMO traffic on each backend (native = the "
+        "default when built); python split: start = libsumo.start (SUMO loading net + routes), "
+        "warmup = the warm-up's steps and moves, other = the rest (warm medians).\n"
+    )
+    head = (
+        f"{'scenario':50s} {'map':22s}│{'cold':>7s} {'warm':>7s} {'parse':>7s} {'init':>7s} │"
+        f"{'native':>7s} {'warm':>7s} │{'python':>7s} {'warm':>7s} {'start':>7s} {'warmup':>7s} {'other':>7s}"
     )
     print(head)
     print("─" * len(head))
     for f in files:
-        p, s = res_plain[f], res_sumo.get(f)
-        name = f"{f.parent.name}/{f.stem}"[:52]
+        p, n, y = res_plain[f], res_native.get(f), res_python.get(f)
         row = (
-            f"{name:52s} {info[f][0][:24]:24s} {fmt(p['cold_ms'])} {fmt(p['warm_ms'])} "
-            f"{fmt(p['parse_ms'])} {fmt(p['init_ms'])} │ "
+            f"{(f.parent.name + '/' + f.stem)[:50]:50s} {info[f][0][:22]:22s}│{fmt(p['cold_ms'])} "
+            f"{fmt(p['warm_ms'])} {fmt(p['parse_ms'])} {fmt(p['init_ms'])} │"
+            f"{fmt(n and n['cold_ms'])} {fmt(n and n['warm_ms'])} │"
         )
-        if s is None:
-            row += " " * 7 + "      –"
+        if y is None:
+            row += " ".join([fmt(None)] * 5)
         else:
-            row += (
-                f"{fmt(s['cold_ms'])} {fmt(s['warm_ms'])} {fmt(s['start_ms'])} "
-                f"{fmt(s['warmup_ms'])} {fmt(s['other_ms'])}"
-            )
+            row += " ".join(fmt(y[k]) for k in ("cold_ms", "warm_ms", "start_ms", "warmup_ms", "other_ms"))
         print(row)
 
-    # Per class: map × the scenario's traffic mode.
+    # Per class: map × the scenario's own traffic mode; max and p50 of each series.
     classes: dict[tuple[str, str], list[Path]] = defaultdict(list)
     for f in files:
         classes[info[f]].append(f)
     print()
-    head = (
-        f"{'class (map · traffic)':40s} {'n':>3s} │ {'cold max':>8s} {'cold p50':>8s} {'warm max':>8s} "
-        f"{'warm p50':>8s} │ {'S cold max':>10s} {'S cold p50':>10s} {'S warm max':>10s} {'S warm p50':>10s}"
+    sub = f"{'max':>7s} {'p50':>7s}"
+    print(
+        f"{'class (map · traffic)':36s} {'n':>3s} │ {'no SUMO cold':^15s} │ {'no SUMO warm':^15s} │ "
+        f"{'native cold':^15s} │ {'native warm':^15s} │ {'python cold':^15s} │ {'python warm':^15s}"
     )
+    head = f"{'':36s} {'':>3s} │ " + " │ ".join([sub] * 6)
     print(head)
     print("─" * len(head))
     for (m, mode), fs in sorted(classes.items()):
-        cold = [res_plain[f]["cold_ms"] for f in fs]
-        warm = [res_plain[f]["warm_ms"] for f in fs]
-        row = (
-            f"{m + ' · ' + mode:40s} {len(fs):3d} │ {max(cold):8.1f} {statistics.median(cold):8.1f} "
-            f"{max(warm):8.1f} {statistics.median(warm):8.1f} │ "
-        )
-        sc = [res_sumo[f]["cold_ms"] for f in fs if f in res_sumo]
-        sw = [res_sumo[f]["warm_ms"] for f in fs if f in res_sumo]
-        if sc:
-            row += (
-                f"{max(sc):10.1f} {statistics.median(sc):10.1f} {max(sw):10.1f} {statistics.median(sw):10.1f}"
-            )
-        else:
-            row += f"{'–':>10s} {'–':>10s} {'–':>10s} {'–':>10s}"
-        print(row)
+        cells = []
+        for res in (res_plain, res_native, res_python):
+            for key in ("cold_ms", "warm_ms"):
+                cells.append(maxp50([res[f][key] for f in fs if f in res]))
+        print(f"{m + ' · ' + mode:36s} {len(fs):3d} │ " + " │ ".join(cells))
 
     print()
     imports = [r["import_ms"] for r in res_plain.values()]
-    print(f"once per process: import drivehierarchy p50 {statistics.median(imports):.0f} ms", end="")
-    if res_sumo:
-        libs = [r["import_libsumo_ms"] for r in res_sumo.values()]
-        print(f", import libsumo p50 {statistics.median(libs):.0f} ms (not in the times above)")
-    else:
-        print()
+    line = "once per process, not in the times above: "
+    line += f"import drivehierarchy p50 {statistics.median(imports):.0f} ms"
+    if res_python:
+        libs = [r["import_libsumo_ms"] for r in res_python.values()]
+        line += f", import libsumo (python backend) p50 {statistics.median(libs):.0f} ms"
+    print(line)
+    if res_native:
+        surplus = [r["cold_ms"] - r["warm_ms"] for r in res_native.values()]
+        print(
+            f"native backend: its first start in a process loads SUMO's C++ library (libsumocpp); "
+            f"cold − warm p50 {statistics.median(surplus):.0f} ms (included in native cold)"
+        )
 
     print("\nbudget (measured / budget; > 1.00 is over):")
-    all_cold = [r["cold_ms"] for r in res_plain.values()]
-    all_warm = [r["warm_ms"] for r in res_plain.values()]
-    print(
-        f"  no SUMO  ≤ {BUDGET_NO_SUMO_MS:.0f} ms: cold max {max(all_cold):.1f} ms "
-        f"= {max(all_cold) / BUDGET_NO_SUMO_MS:.2f}x, p50 {statistics.median(all_cold):.1f} ms; "
-        f"warm max {max(all_warm):.1f} ms = {max(all_warm) / BUDGET_NO_SUMO_MS:.2f}x"
-    )
-    over = [f for f in files if res_plain[f]["cold_ms"] > BUDGET_NO_SUMO_MS]
-    if res_sumo:
-        sc = [r["cold_ms"] for r in res_sumo.values()]
-        sw = [r["warm_ms"] for r in res_sumo.values()]
+    budget_line("no SUMO", BUDGET_NO_SUMO_MS, res_plain)
+    if res_native:
+        budget_line("SUMO, native backend (default)", BUDGET_SUMO_MS, res_native)
+    if res_python:
+        budget_line("SUMO, python backend (libsumo)", BUDGET_SUMO_MS, res_python)
+        # Its first env in a process also imports libsumo (which imports traci and sumolib).
+        first = [r["cold_ms"] + r["import_libsumo_ms"] for r in res_python.values()]
         print(
-            f"  SUMO     ≤ {BUDGET_SUMO_MS:.0f} ms: cold max {max(sc):.1f} ms "
-            f"= {max(sc) / BUDGET_SUMO_MS:.2f}x, "
-            f"p50 {statistics.median(sc):.1f} ms; warm max {max(sw):.1f} ms = {max(sw) / BUDGET_SUMO_MS:.2f}x"
+            f"  {'  … + import libsumo (first in process)':34s} ≤ {BUDGET_SUMO_MS:3.0f} ms: cold max "
+            f"{max(first):6.1f} ms = {max(first) / BUDGET_SUMO_MS:.2f}x, "
+            f"p50 {statistics.median(first):6.1f} ms"
         )
-        over += [f for f, r in res_sumo.items() if r["cold_ms"] > BUDGET_SUMO_MS]
+    over = [f for f in files if res_plain[f]["cold_ms"] > BUDGET_NO_SUMO_MS]
+    over += [f for f, r in {**res_native, **res_python}.items() if r["cold_ms"] > BUDGET_SUMO_MS]
     if over:
         print("  over budget (cold):")
         for f in dict.fromkeys(over):
-            p, s = res_plain[f], res_sumo.get(f)
+            p, n, y = res_plain[f], res_native.get(f), res_python.get(f)
             parts = (
-                f"no-SUMO cold {p['cold_ms']:.0f} = map parse {p['parse_ms']:.0f} + first-env init "
+                f"no SUMO {p['cold_ms']:.0f} = map parse {p['parse_ms']:.0f} + first-env init "
                 f"{p['init_ms']:.0f} + warm {p['warm_ms']:.0f}"
             )
-            if s is not None:
-                start, warmup, other = s["cold_parts"]
+            if n is not None:
+                parts += f"; native {n['cold_ms']:.0f} (warm {n['warm_ms']:.0f})"
+            if y is not None:
+                start, warmup, other = y["cold_parts"]
                 parts += (
-                    f", SUMO cold {s['cold_ms']:.0f} = libsumo.start {start:.0f} + warm-up "
-                    f"{warmup:.0f} + other {other:.0f}"
+                    f"; python {y['cold_ms']:.0f} = libsumo.start {start:.0f} + warm-up {warmup:.0f} "
+                    f"+ other {other:.0f}"
                 )
             print(f"    {f.parent.name}/{f.stem}: {parts}")
     else:
@@ -386,16 +414,15 @@ def main() -> None:
         f"peer: highway-env highway-v0 gym.make + reset: cold {peer['cold_ms']:.1f} ms, warm "
         f"{peer['warm_ms']:.1f} ms (import {peer['import_ms']:.0f} ms, not included)"
     )
-    ours_warm = statistics.median(all_warm)
-    ours_cold = statistics.median(all_cold)
-    print(
-        f"ratio ours no-SUMO p50 / highway-v0: cold {ours_cold / peer['cold_ms']:.2f}x, "
-        f"warm {ours_warm / peer['warm_ms']:.2f}x (< 1 = ours faster)"
-    )
-    if res_sumo:
+    rows = [("no SUMO", res_plain), ("SUMO native", res_native), ("SUMO python", res_python)]
+    for label, res in rows:
+        if not res:
+            continue
+        cold = statistics.median(r["cold_ms"] for r in res.values())
+        warm = statistics.median(r["warm_ms"] for r in res.values())
         print(
-            f"ratio ours with SUMO p50 / highway-v0: cold {statistics.median(sc) / peer['cold_ms']:.2f}x, "
-            f"warm {statistics.median(sw) / peer['warm_ms']:.2f}x"
+            f"ratio ours {label:11s} p50 / highway-v0: cold {cold / peer['cold_ms']:.2f}x, "
+            f"warm {warm / peer['warm_ms']:.2f}x (< 1 = ours faster)"
         )
     sys.stdout.flush()
 

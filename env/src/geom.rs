@@ -352,6 +352,35 @@ impl Polyline {
         }
     }
 
+    /// Closest point among the segments overlapping arc lengths [`s_min`, `s_max`] (progress
+    /// tracking along a route that passes near itself). `None` if no segment overlaps.
+    pub fn project_within(&self, p: Vec2, s_min: f64, s_max: f64) -> Option<Projection> {
+        let n = self.pts.len();
+        if n < 2 {
+            return self.project(p);
+        }
+        let mut best: Option<(f64, usize, f64)> = None;
+        for i in self.segment_at(s_min.max(0.0))..n - 1 {
+            if self.cum[i] > s_max {
+                break;
+            }
+            let (t, d2) = closest_on_segment(p, self.pts[i], self.pts[i + 1]);
+            if best.is_none_or(|b| d2 < b.0) {
+                best = Some((d2, i, t));
+            }
+        }
+        let (d2, i, t) = best?;
+        let (a, b) = (self.pts[i], self.pts[i + 1]);
+        let distance = d2.sqrt();
+        Some(Projection {
+            s: self.cum[i] + t * (self.cum[i + 1] - self.cum[i]),
+            distance,
+            lateral: if (b - a).cross(p - a) >= 0.0 { distance } else { -distance },
+            segment: i,
+            point: a.lerp(b, t),
+        })
+    }
+
     /// Index of the segment containing arc length `s` (clamped).
     fn segment_at(&self, s: f64) -> usize {
         let n = self.pts.len();

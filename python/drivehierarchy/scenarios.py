@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import importlib.util
+import os
 from pathlib import Path
 
 from drivehierarchy._core import ScenarioError
@@ -56,3 +57,16 @@ def sumo_home() -> str | None:
     if spec is None or spec.origin is None:
         return None
     return str(Path(spec.origin).parent)
+
+
+def sumo_runtime_home() -> str:
+    """`sumo_home()` for starting SUMO, with the environment `import sumo` would set up
+    (`SUMO_HOME`, and `PROJ_LIB`/`PROJ_DATA` for its projection data) without paying for the
+    import; `ImportError` when `eclipse-sumo` is not installed."""
+    home = sumo_home()
+    if home is None:
+        raise ImportError("no module named 'sumo' (the eclipse-sumo package)")
+    os.environ.setdefault("SUMO_HOME", home)
+    if not os.environ.get("PROJ_LIB") and not os.environ.get("PROJ_DATA"):
+        os.environ["PROJ_LIB"] = os.environ["PROJ_DATA"] = os.path.join(home, "data", "proj")
+    return home

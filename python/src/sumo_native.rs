@@ -71,6 +71,7 @@ struct Api {
     read_lights: unsafe extern "C" fn() -> c_int,
     tl_state: unsafe extern "C" fn(usize) -> *const c_char,
     set_phase: unsafe extern "C" fn(*const c_char, i32, f64) -> c_int,
+    set_program: unsafe extern "C" fn(*const c_char, usize, *const *const c_char, *const f64) -> c_int,
     // Never unloaded: SUMO's globals outlive any one simulation.
     _libs: [Library; 2],
 }
@@ -120,6 +121,7 @@ fn load(shim: &Path, libsumocpp: &Path) -> std::result::Result<Api, String> {
             read_lights: sym!("dh_sumo_read_lights"),
             tl_state: sym!("dh_sumo_tl_state"),
             set_phase: sym!("dh_sumo_set_phase"),
+            set_program: sym!("dh_sumo_set_program"),
             _libs: [sumo, lib],
         })
     }
@@ -240,6 +242,16 @@ impl Api {
         let t = cstr(tl)?;
         let rc = unsafe { (self.set_phase)(t.as_ptr(), phase as i32, remaining_s) };
         self.check(rc, &format!("setting the phase of light {tl}"))
+    }
+
+    /// Installs a replacement program (`[[lights]] phases`) and switches the light to it.
+    fn set_program(&self, tl: &str, phases: &[(String, f64)]) -> Result<()> {
+        let t = cstr(tl)?;
+        let states = phases.iter().map(|(s, _)| cstr(s)).collect::<Result<Vec<_>>>()?;
+        let ptrs: Vec<*const c_char> = states.iter().map(|s| s.as_ptr()).collect();
+        let durations: Vec<f64> = phases.iter().map(|p| p.1).collect();
+        let rc = unsafe { (self.set_program)(t.as_ptr(), ptrs.len(), ptrs.as_ptr(), durations.as_ptr()) };
+        self.check(rc, &format!("setting the program of light {tl}"))
     }
 }
 
@@ -489,18 +501,23 @@ impl TrafficModel for NativeSumoBridge {
         s.start(&self.sync.net, &routes, seed)?;
         let api = s.api;
         self.light_ids = api.light_ids();
+        for (tl, phases) in self.sync.replaced_programs() {
+            if !self.light_ids.contains(&tl) {
+                return Err(Error::Simulation(format!("light override: SUMO has no traffic light {tl:?}")));
+            }
+            api.set_program(&tl, &phases)?;
+        }
         api.add(EGO_ID, EGO_ROUTE, "dh_ego")?;
         // Python's round (the Python backend's): ties to even.
         let warmup = (self.sync.demand.warmup_s / STEP_LENGTH_S).round_ties_even() as u64;
         for _ in 0..warmup {
             s.step(&self.sync.movers)?;
         }
-        if self.sync.demand.warmup_s > 0.0 {
-            let known: BTreeSet<&str> = self.light_ids.iter().map(String::as_str).collect();
-            for (tl, phase, remaining) in self.sync.light_sync() {
-                if known.contains(tl.as_str()) {
-                    api.set_phase(&tl, phase, remaining)?;
-                }
+        // Also without a warm-up: `[[lights]]` overrides start where the world's model does.
+        let known: BTreeSet<&str> = self.light_ids.iter().map(String::as_str).collect();
+        for (tl, phase, remaining) in self.sync.light_sync() {
+            if known.contains(tl.as_str()) {
+                api.set_phase(&tl, phase, remaining)?;
             }
         }
         self.read(api, out)

@@ -11,7 +11,7 @@
 use dh_env::geom::{Pose, Vec2};
 use dh_env::map::VClass;
 use dh_env::scenario::traffic::{kind_of_vclass, mirror_specs, MirrorSpec, TrafficDemand};
-use dh_env::scenario::{ResolvedEgo, ResolvedScenario, PALETTE};
+use dh_env::scenario::{LightProgram, ResolvedEgo, ResolvedScenario, PALETTE};
 use dh_env::view::ActorKind;
 use dh_env::world::{TrafficAgent, TrafficFrame, TrafficInput, TrafficModel};
 use dh_env::{Error, Result};
@@ -88,6 +88,8 @@ pub(crate) struct SumoSync {
     pub ego: ResolvedEgo,
     pub mirrors: Vec<MirrorSpec>,
     pub movers: Vec<Mover>,
+    /// The scenario's `[[lights]]` overrides.
+    pub programs: Vec<LightProgram>,
 }
 
 impl SumoSync {
@@ -99,31 +101,43 @@ impl SumoSync {
             ego: scenario.ego.clone(),
             mirrors: mirror_specs(&scenario.actors),
             movers: Vec::new(),
+            programs: scenario.lights.clone(),
         }
     }
 
-    /// For each light, the phase and its remaining time that the map's program has at episode
-    /// t = 0: SUMO runs `warmup_s` before t = 0, so its lights are set to this at the end of the
-    /// warm-up and then show what they would without one.
+    /// For each light, the phase and its remaining time that its program (the map's, or the
+    /// scenario's `[[lights]]` override) has at episode t = 0: SUMO runs `warmup_s` before
+    /// t = 0, so its lights are set to this at the end of the warm-up and then show what the
+    /// world's own light model would.
     pub fn light_sync(&self) -> Vec<(String, usize, f64)> {
         let mut out = Vec::new();
         for tl in self.map.tl_ids() {
-            let Some(logic) = self.map.tl_logic(tl) else { continue };
-            let cycle = logic.cycle_s();
-            if logic.phases.is_empty() || !cycle.is_finite() || cycle <= 0.0 {
-                continue;
-            }
-            let pos = (-logic.offset_s).rem_euclid(cycle);
-            let mut end = 0.0;
-            for (i, p) in logic.phases.iter().enumerate() {
-                end += p.duration_s.max(0.0);
-                if pos < end {
-                    out.push((tl.to_string(), i, end - pos));
-                    break;
+            let program = match self.programs.iter().find(|p| p.tl_id == tl) {
+                Some(p) => p.clone(),
+                None => {
+                    let Some(logic) = self.map.tl_logic(tl) else { continue };
+                    LightProgram {
+                        tl_id: tl.to_string(),
+                        offset_s: logic.offset_s,
+                        phases: logic.phases.clone(),
+                        replaced: false,
+                    }
                 }
+            };
+            if let Some((i, left)) = program.phase_at(0.0) {
+                out.push((tl.to_string(), i, left));
             }
         }
         out
+    }
+
+    /// Replacement programs for SUMO (`trafficlight.setProgramLogic`): (light, [(state, s)]).
+    pub fn replaced_programs(&self) -> Vec<(String, Vec<(String, f64)>)> {
+        self.programs
+            .iter()
+            .filter(|p| p.replaced)
+            .map(|p| (p.tl_id.clone(), p.phases.iter().map(|ph| (ph.state.clone(), ph.duration_s)).collect()))
+            .collect()
     }
 
     /// The SUMO route file of an episode.
@@ -224,9 +238,10 @@ impl SumoBridge {
                 Some((seed, routes)) => {
                     let net = self.sync.net.to_string_lossy().into_owned();
                     let sync = self.sync.light_sync();
+                    let programs = self.sync.replaced_programs();
                     obj.call_method1(
                         method,
-                        (net, routes.as_str(), *seed, self.sync.demand.warmup_s, movers, sync),
+                        (net, routes.as_str(), *seed, self.sync.demand.warmup_s, movers, sync, programs),
                     )?
                 }
                 None => obj.call_method1(method, (movers,))?,

@@ -19,6 +19,7 @@
 #include <cstring>
 #include <exception>
 #include <map>
+#include <memory>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -237,6 +238,18 @@ DH_API int dh_sumo_set_phase(const char* tl, int32_t phase, double remaining_s) 
     return guarded([&] {
         libsumo::TrafficLight::setPhase(tl, phase);
         libsumo::TrafficLight::setPhaseDuration(tl, remaining_s);
+    });
+}
+
+// Installs and switches to a replacement program (the scenario's `[[lights]] phases`).
+DH_API int dh_sumo_set_program(const char* tl, size_t n, const char* const* states, const double* durations) {
+    return guarded([&] {
+        std::vector<std::shared_ptr<libsumo::TraCIPhase>> phases;
+        for (size_t i = 0; i < n; ++i) {
+            phases.push_back(std::make_shared<libsumo::TraCIPhase>(durations[i], std::string(states[i])));
+        }
+        libsumo::TrafficLight::setProgramLogic(tl, libsumo::TraCILogic("dh_override", 0, 0, phases));
+        libsumo::TrafficLight::setProgram(tl, "dh_override");
     });
 }
 

@@ -97,6 +97,57 @@ pub enum Trigger {
     Time(f64),
     /// Starts when the ego centre is within `radius_m` of `point`.
     EgoWithin { radius_m: f64, point: Vec2 },
+    /// Starts when the ego is expected to reach `point` within `eta_s`: its distance along its
+    /// route to `route_s` (the point's projection) ÷ max(ego speed, [`ETA_MIN_SPEED_MPS`]) ≤
+    /// `eta_s`, while the point is still ahead.
+    EgoEta { eta_s: f64, point: Vec2, route_s: f64 },
+    /// Starts `delay_s` after `event` of the scenario actor with index `actor` (id = index + 1).
+    After { actor: usize, event: ChainEvent, delay_s: f64 },
+}
+
+/// Floor of the ego speed in the time-to-conflict estimate, m/s (a standing ego is expected to
+/// move off at walking pace rather than never).
+pub const ETA_MIN_SPEED_MPS: f64 = 0.5;
+/// A time-to-conflict point must lie this close to the ego route, m.
+pub const ETA_MAX_OFFSET_M: f64 = 30.0;
+
+/// The event of another actor a chained trigger follows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ChainEvent {
+    Start,
+    Brake,
+    End,
+}
+
+/// The program a traffic light runs in the episode (a `[[lights]]` override resolved against
+/// the map): at episode time t it is at cycle position (t − `offset_s`) mod cycle, SUMO's
+/// meaning of `offset`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LightProgram {
+    pub tl_id: String,
+    pub offset_s: f64,
+    pub phases: Vec<crate::map::TlPhase>,
+    /// Whether `phases` replace the map's program (SUMO must be given the new logic).
+    pub replaced: bool,
+}
+
+impl LightProgram {
+    /// (phase index, seconds left in it) at episode time `t`.
+    pub fn phase_at(&self, t: f64) -> Option<(usize, f64)> {
+        let cycle: f64 = self.phases.iter().map(|p| p.duration_s.max(0.0)).sum();
+        if self.phases.is_empty() || !cycle.is_finite() || cycle <= 0.0 {
+            return None;
+        }
+        let pos = (t - self.offset_s).rem_euclid(cycle);
+        let mut end = 0.0;
+        for (i, p) in self.phases.iter().enumerate() {
+            end += p.duration_s.max(0.0);
+            if pos < end {
+                return Some((i, end - pos));
+            }
+        }
+        Some((self.phases.len() - 1, 0.0))
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -194,6 +245,8 @@ pub struct ResolvedScenario {
     pub signs: Vec<SignView>,
     /// Background-traffic demand (`[traffic]`; mode `none` when absent).
     pub traffic: crate::scenario::traffic::TrafficDemand,
+    /// Traffic-light overrides (`[[lights]]`), one per overridden light, in file order.
+    pub lights: Vec<LightProgram>,
 }
 
 impl ResolvedScenario {
@@ -216,37 +269,84 @@ impl ResolvedScenario {
             return d;
         }
         let t_ref = self.reference_duration_s();
-        let ego_speed = self.route_length_m() / t_ref;
+        let starts = self.estimated_start_times_s();
         self.actors
             .iter()
-            .filter_map(|a| match &a.motion {
-                ActorMotion::Scripted(p) => Some(scripted_finish_s(p, &self.ego.route, ego_speed)),
+            .zip(&starts)
+            .filter_map(|(a, &start)| match &a.motion {
+                ActorMotion::Scripted(p) => Some(start + travel_s(p, p.path.length()) + hold_s(p)),
                 _ => None,
             })
             .filter(|d| d.is_finite())
             .fold(t_ref, f64::max)
     }
+
+    /// Estimated trigger time of every actor (non-scripted: 0), the ego progressing along its
+    /// route at L / T_ref: `time_s` as given; `ego_within_m` when the ego enters the radius;
+    /// `ego_eta_s` when the ego is `eta_s` from the point at that pace (s_point / v − eta);
+    /// chained triggers at the other actor's estimated event (start; start + time to its
+    /// brake; start + travel + hold for the end) + `delay_s`.
+    pub fn estimated_start_times_s(&self) -> Vec<f64> {
+        let ego_speed = self.route_length_m() / self.reference_duration_s();
+        let mut memo: Vec<Option<f64>> = vec![None; self.actors.len()];
+        (0..self.actors.len()).map(|i| self.estimate_start(i, ego_speed, &mut memo, 0)).collect()
+    }
+
+    fn estimate_start(&self, i: usize, ego_speed: f64, memo: &mut Vec<Option<f64>>, depth: usize) -> f64 {
+        if let Some(t) = memo[i] {
+            return t;
+        }
+        let ActorMotion::Scripted(p) = &self.actors[i].motion else { return 0.0 };
+        let t = match p.trigger {
+            Trigger::Time(t) => t,
+            Trigger::EgoWithin { radius_m, point } => match self.ego.route.project(point) {
+                Some(proj) if ego_speed > 0.0 => (proj.s - radius_m).max(0.0) / ego_speed,
+                _ => 0.0,
+            },
+            Trigger::EgoEta { eta_s, route_s, .. } => {
+                if ego_speed > 0.0 {
+                    (route_s / ego_speed - eta_s).max(0.0)
+                } else {
+                    0.0
+                }
+            }
+            // Cycles are rejected at load; the depth guard keeps a hand-built one finite.
+            Trigger::After { actor, event, delay_s } if depth < self.actors.len() => {
+                let t0 = self.estimate_start(actor, ego_speed, memo, depth + 1);
+                let ev = match (&self.actors[actor].motion, event) {
+                    (ActorMotion::Scripted(q), ChainEvent::Brake) => match q.brake.map(|b| b.when) {
+                        Some(BrakeWhen::AfterS(dt)) => dt,
+                        Some(BrakeWhen::AtS(s)) => travel_s(q, s),
+                        None => 0.0,
+                    },
+                    (ActorMotion::Scripted(q), ChainEvent::End) => travel_s(q, q.path.length()) + hold_s(q),
+                    _ => 0.0,
+                };
+                t0 + ev + delay_s
+            }
+            Trigger::After { .. } => 0.0,
+        };
+        memo[i] = Some(t);
+        t
+    }
 }
 
-/// Estimated time at which a scripted actor finishes its path.
-fn scripted_finish_s(p: &ScriptedPath, ego_route: &Polyline, ego_speed_mps: f64) -> f64 {
-    let start = match p.trigger {
-        Trigger::Time(t) => t,
-        Trigger::EgoWithin { radius_m, point } => match ego_route.project(point) {
-            Some(proj) if ego_speed_mps > 0.0 => (proj.s - radius_m).max(0.0) / ego_speed_mps,
-            _ => 0.0,
-        },
-    };
+/// Travel time of a scripted path from its start to arc length `upto` at the leg speeds.
+fn travel_s(p: &ScriptedPath, upto: f64) -> f64 {
     let mut travel = 0.0;
     let mut from = 0.0;
     for &(end, speed) in &p.legs {
-        if speed > 0.0 {
-            travel += (end - from).max(0.0) / speed;
+        let end = end.min(upto);
+        if speed > 0.0 && end > from {
+            travel += (end - from) / speed;
         }
-        from = end;
+        from = from.max(end);
     }
-    let hold = p.brake.and_then(|b| b.hold_s).unwrap_or(0.0);
-    start + travel + hold
+    travel
+}
+
+fn hold_s(p: &ScriptedPath) -> f64 {
+    p.brake.and_then(|b| b.hold_s).unwrap_or(0.0)
 }
 
 /// Where `sumo:` maps live and an optional cache of loaded networks.
@@ -695,41 +795,184 @@ fn lane_chain(ctx: &Ctx<'_>, field: &str, ids: &[String]) -> Result<Vec<LaneIdx>
     Ok(out)
 }
 
-fn resolve_trigger(ctx: &Ctx<'_>, field: &str, t: Option<&TriggerSpec>, self_pos: Vec2) -> Result<Trigger> {
-    let Some(t) = t else { return Ok(Trigger::Time(0.0)) };
-    match (t.time_s, t.ego_within_m) {
-        (Some(ts), None) => {
-            if let Some(of) = &t.of {
-                return Err(ctx.err(
-                    format!("{field}.of"),
-                    format!("{of:?}"),
-                    "`of` goes with `ego_within_m`, not `time_s`",
-                ));
-            }
-            Ok(Trigger::Time(ctx.nonneg(&format!("{field}.time_s"), ts)?))
-        }
-        (None, Some(r)) => {
-            let radius_m = ctx.positive(&format!("{field}.ego_within_m"), r)?;
-            let point = match &t.of {
-                None => self_pos,
-                Some(OfSpec::Name(n)) if n == "actor_self" => self_pos,
-                Some(OfSpec::Name(n)) => {
-                    return Err(ctx.err(format!("{field}.of"), n, "the only name allowed is \"actor_self\""))
-                }
-                Some(OfSpec::Point([x, y])) => Vec2::new(
-                    ctx.finite(&format!("{field}.of[0]"), *x)?,
-                    ctx.finite(&format!("{field}.of[1]"), *y)?,
-                ),
-                Some(OfSpec::Place(p)) => ctx.place(&format!("{field}.of"), p)?.0.pos,
-            };
-            Ok(Trigger::EgoWithin { radius_m, point })
-        }
-        (Some(ts), Some(_)) => Err(ctx.err(field, ts, "give exactly one of `time_s` or `ego_within_m`")),
-        (None, None) => Err(ctx.err(field, "{}", "give `time_s` or `ego_within_m`")),
-    }
+/// What a trigger needs besides its own table: the ego route (time-to-conflict points) and the
+/// scenario actors' names (chained triggers).
+struct TriggerCtx<'a> {
+    ego_route: &'a Polyline,
+    names: &'a [String],
 }
 
-fn resolve_actor(ctx: &Ctx<'_>, i: usize, a: &ActorSpec) -> Result<ResolvedActor> {
+fn resolve_of(ctx: &Ctx<'_>, field: &str, of: Option<&OfSpec>, self_pos: Vec2) -> Result<Vec2> {
+    Ok(match of {
+        None => self_pos,
+        Some(OfSpec::Name(n)) if n == "actor_self" => self_pos,
+        Some(OfSpec::Name(n)) => {
+            return Err(ctx.err(format!("{field}.of"), n, "the only name allowed is \"actor_self\""))
+        }
+        Some(OfSpec::Point([x, y])) => {
+            Vec2::new(ctx.finite(&format!("{field}.of[0]"), *x)?, ctx.finite(&format!("{field}.of[1]"), *y)?)
+        }
+        Some(OfSpec::Place(p)) => ctx.place(&format!("{field}.of"), p)?.0.pos,
+    })
+}
+
+fn resolve_trigger(
+    ctx: &Ctx<'_>,
+    tc: &TriggerCtx<'_>,
+    field: &str,
+    t: Option<&TriggerSpec>,
+    self_pos: Vec2,
+) -> Result<Trigger> {
+    let Some(t) = t else { return Ok(Trigger::Time(0.0)) };
+    let given: Vec<&str> = [
+        ("time_s", t.time_s.is_some()),
+        ("ego_within_m", t.ego_within_m.is_some()),
+        ("ego_eta_s", t.ego_eta_s.is_some()),
+        ("after", t.after.is_some()),
+    ]
+    .iter()
+    .filter(|g| g.1)
+    .map(|g| g.0)
+    .collect();
+    if given.len() != 1 {
+        return Err(ctx.err(
+            field,
+            if given.is_empty() { "{}".to_string() } else { given.join(" + ") },
+            "give exactly one of `time_s`, `ego_within_m`, `ego_eta_s` or `after`",
+        ));
+    }
+    let of_ok = t.ego_within_m.is_some() || t.ego_eta_s.is_some();
+    if let (Some(of), false) = (&t.of, of_ok) {
+        return Err(ctx.err(
+            format!("{field}.of"),
+            format!("{of:?}"),
+            "`of` goes with `ego_within_m` or `ego_eta_s`",
+        ));
+    }
+    if t.after.is_none() {
+        if let Some(d) = t.delay_s {
+            return Err(ctx.err(format!("{field}.delay_s"), d, "`delay_s` goes with `after`"));
+        }
+        if let Some(e) = t.event {
+            return Err(ctx.err(format!("{field}.event"), format!("{e:?}"), "`event` goes with `after`"));
+        }
+    }
+    if let Some(ts) = t.time_s {
+        return Ok(Trigger::Time(ctx.nonneg(&format!("{field}.time_s"), ts)?));
+    }
+    if let Some(r) = t.ego_within_m {
+        let radius_m = ctx.positive(&format!("{field}.ego_within_m"), r)?;
+        let point = resolve_of(ctx, field, t.of.as_ref(), self_pos)?;
+        return Ok(Trigger::EgoWithin { radius_m, point });
+    }
+    if let Some(eta) = t.ego_eta_s {
+        let eta_s = ctx.positive(&format!("{field}.ego_eta_s"), eta)?;
+        let point = resolve_of(ctx, field, t.of.as_ref(), self_pos)?;
+        let route = tc.ego_route;
+        let proj =
+            route.project(point).ok_or_else(|| ctx.err(format!("{field}.of"), "?", "empty ego route"))?;
+        // The foot of the perpendicular must fall strictly inside the route (not clamped to
+        // its start or destination) and near it.
+        if proj.s <= 1e-6 || proj.s >= route.length() - 1e-6 || proj.distance > ETA_MAX_OFFSET_M {
+            return Err(ctx.err(
+                format!("{field}.of"),
+                format!("({:.2}, {:.2})", point.x, point.y),
+                format!(
+                    "does not project onto the ego route: nearest route point at s = {:.1} m of {:.1} m, {:.1} m away (the point must lie beside the route, within {ETA_MAX_OFFSET_M} m, between the ego start and destination)",
+                    proj.s,
+                    route.length(),
+                    proj.distance
+                ),
+            ));
+        }
+        return Ok(Trigger::EgoEta { eta_s, point, route_s: proj.s });
+    }
+    let name = t.after.as_deref().unwrap_or_default();
+    let af = format!("{field}.after");
+    let hits: Vec<usize> = tc.names.iter().enumerate().filter(|(_, n)| *n == name).map(|(i, _)| i).collect();
+    let actor = match hits.as_slice() {
+        [i] => *i,
+        [] => {
+            return Err(ctx.err(
+                &af,
+                format!("\"{name}\""),
+                format!("no actor of that name (actors: {})", tc.names.join(", ")),
+            ))
+        }
+        _ => {
+            return Err(ctx.err(
+                &af,
+                format!("\"{name}\""),
+                "several actors have that name; give them unique `name`s",
+            ))
+        }
+    };
+    let delay_s = ctx.nonneg(&format!("{field}.delay_s"), t.delay_s.unwrap_or(0.0))?;
+    let event = match t.event.unwrap_or_default() {
+        ChainEventSpec::Start => ChainEvent::Start,
+        ChainEventSpec::Brake => ChainEvent::Brake,
+        ChainEventSpec::End => ChainEvent::End,
+    };
+    Ok(Trigger::After { actor, event, delay_s })
+}
+
+/// Chained triggers must point at scripted actors (brake: one with a brake event) and must
+/// not form a cycle.
+fn check_chains(file: &Path, actors: &[ResolvedActor]) -> Result<()> {
+    let target = |i: usize| match &actors[i].motion {
+        ActorMotion::Scripted(p) => match p.trigger {
+            Trigger::After { actor, event, .. } => Some((actor, event)),
+            _ => None,
+        },
+        _ => None,
+    };
+    for i in 0..actors.len() {
+        let Some((j, event)) = target(i) else { continue };
+        let field = format!("actors[{i}].start.after");
+        let value = format!("\"{}\"", actors[j].name);
+        match &actors[j].motion {
+            ActorMotion::Scripted(q) => {
+                if event == ChainEvent::Brake && q.brake.is_none() {
+                    return Err(Error::scenario(
+                        file,
+                        field,
+                        value,
+                        "event = \"brake\" but that actor has no `brake`",
+                    ));
+                }
+            }
+            _ => {
+                return Err(Error::scenario(
+                    file,
+                    field,
+                    value,
+                    "that actor is not scripted (it has no trigger or events)",
+                ))
+            }
+        }
+        let mut chain = vec![i];
+        let mut k = j;
+        for _ in 0..actors.len() {
+            if k == i {
+                let names: Vec<&str> = chain.iter().map(|&x| actors[x].name.as_str()).collect();
+                return Err(Error::scenario(
+                    file,
+                    field,
+                    value,
+                    format!("chained triggers form a cycle: {} → {}", names.join(" → "), actors[i].name),
+                ));
+            }
+            chain.push(k);
+            match target(k) {
+                Some((n, _)) => k = n,
+                None => break,
+            }
+        }
+    }
+    Ok(())
+}
+
+fn resolve_actor(ctx: &Ctx<'_>, tc: &TriggerCtx<'_>, i: usize, a: &ActorSpec) -> Result<ResolvedActor> {
     let map = ctx.map;
     let field = format!("actors[{i}]");
     let (length_m, width_m, height_m) = size(ctx, &field, a.kind, a.length_m, a.width_m, a.height_m)?;
@@ -769,6 +1012,13 @@ fn resolve_actor(ctx: &Ctx<'_>, i: usize, a: &ActorSpec) -> Result<ResolvedActor
     let (path, legs) = match (&a.waypoints, &a.route) {
         (Some(wps), None) => {
             let f = format!("{field}.waypoints");
+            if !a.lane_changes.is_empty() {
+                return Err(ctx.err(
+                    format!("{field}.lane_changes"),
+                    a.lane_changes.len(),
+                    "lane changes need a `route` actor (its path follows lanes)",
+                ));
+            }
             if wps.is_empty() {
                 return Err(ctx.err(&f, "[]", "empty waypoint list (needs at least 2 points)"));
             }
@@ -807,7 +1057,7 @@ fn resolve_actor(ctx: &Ctx<'_>, i: usize, a: &ActorSpec) -> Result<ResolvedActor
         (None, Some(r)) => {
             let f = format!("{field}.route");
             let vclass = vclass_of(a.kind);
-            let full = match (&r.edges, &r.lanes) {
+            let lanes = match (&r.edges, &r.lanes) {
                 (Some(ids), None) => {
                     let edges = ctx.edge_chain(&format!("{f}.edges"), ids, vclass)?;
                     let start_lane = match &r.start_lane {
@@ -824,7 +1074,7 @@ fn resolve_actor(ctx: &Ctx<'_>, i: usize, a: &ActorSpec) -> Result<ResolvedActor
                         }
                         None => None,
                     };
-                    map.route_polyline_for(&edges, start_lane, vclass)
+                    map.route_lanes_for(&edges, start_lane, vclass)
                         .map_err(|e| map_err(ctx, &format!("{f}.edges"), &route_label(map, &edges), e))?
                 }
                 (None, Some(ids)) => {
@@ -835,10 +1085,11 @@ fn resolve_actor(ctx: &Ctx<'_>, i: usize, a: &ActorSpec) -> Result<ResolvedActor
                             "`start_lane` goes with `edges`; the lane list starts at its first lane",
                         ));
                     }
-                    map.lanes_polyline(&lane_chain(ctx, &format!("{f}.lanes"), ids)?)
+                    lane_chain(ctx, &format!("{f}.lanes"), ids)?
                 }
                 _ => return Err(ctx.err(&f, "{..}", "give exactly one of `edges` or `lanes`")),
             };
+            let full = map.lanes_polyline(&lanes);
             let len = full.length();
             let s0 = ctx.nonneg(&format!("{f}.start_s"), r.start_s.unwrap_or(0.0))?;
             let s1 = ctx.nonneg(&format!("{f}.end_s"), r.end_s.unwrap_or(len))?.min(len);
@@ -849,6 +1100,7 @@ fn resolve_actor(ctx: &Ctx<'_>, i: usize, a: &ActorSpec) -> Result<ResolvedActor
                     format!("start_s must be below end_s ({s1:.2}) and the route length ({len:.2} m)"),
                 ));
             }
+            let (full, s1) = apply_lane_changes(ctx, &field, full, &lanes, s0, s1, &a.lane_changes, vclass)?;
             let off = ctx.finite(&format!("{f}.offset_m"), r.offset_m.unwrap_or(0.0))?;
             let path = offset_polyline(&full.slice(s0, s1), off);
             let l = path.length();
@@ -872,7 +1124,7 @@ fn resolve_actor(ctx: &Ctx<'_>, i: usize, a: &ActorSpec) -> Result<ResolvedActor
         None if a.kind == ActorKind::Pedestrian => f64::INFINITY,
         None => 3.0,
     };
-    let trigger = resolve_trigger(ctx, &format!("{field}.start"), a.start.as_ref(), path.point_at(0.0))?;
+    let trigger = resolve_trigger(ctx, tc, &format!("{field}.start"), a.start.as_ref(), path.point_at(0.0))?;
     let brake = match &a.brake {
         None => None,
         Some(b) => {
@@ -988,9 +1240,18 @@ pub fn resolve(file: &Path, spec: &ScenarioFile, opts: &LoadOptions) -> Result<R
     let ctx = Ctx { file, map: &map };
     let ego = resolve_ego(&ctx, &spec.ego)?;
     let mut actors = Vec::with_capacity(spec.actors.len() + spec.obstacles.len());
+    let names: Vec<String> = spec
+        .actors
+        .iter()
+        .enumerate()
+        .map(|(i, a)| a.name.clone().unwrap_or_else(|| format!("actors[{i}]")))
+        .collect();
+    let tc = TriggerCtx { ego_route: &ego.route, names: &names };
     for (i, a) in spec.actors.iter().enumerate() {
-        actors.push(resolve_actor(&ctx, i, a)?);
+        actors.push(resolve_actor(&ctx, &tc, i, a)?);
     }
+    check_chains(file, &actors)?;
+    let lights = resolve_lights(&ctx, &spec.lights)?;
     for (i, o) in spec.obstacles.iter().enumerate() {
         actors.push(resolve_obstacle(&ctx, i, spec.actors.len() + i, o)?);
     }
@@ -1013,5 +1274,262 @@ pub fn resolve(file: &Path, spec: &ScenarioFile, opts: &LoadOptions) -> Result<R
         actors,
         signs,
         traffic,
+        lights,
     })
+}
+
+/// `[[lights]]` → the programs the overridden lights run (see [`LightProgram`]).
+fn resolve_lights(ctx: &Ctx<'_>, specs: &[LightOverrideSpec]) -> Result<Vec<LightProgram>> {
+    let map = ctx.map;
+    let mut out: Vec<LightProgram> = Vec::with_capacity(specs.len());
+    for (i, l) in specs.iter().enumerate() {
+        let f = format!("lights[{i}]");
+        let tl_id = l.tls.as_str();
+        let known = map.tl_ids();
+        if !known.contains(&tl_id) {
+            return Err(ctx.err(
+                format!("{f}.tls"),
+                format!("\"{tl_id}\""),
+                format!("no traffic light of that id in the map (lights: {})", known.join(", ")),
+            ));
+        }
+        if out.iter().any(|o| o.tl_id == tl_id) {
+            return Err(ctx.err(format!("{f}.tls"), format!("\"{tl_id}\""), "overridden twice"));
+        }
+        let logic = map.tl_logic(tl_id);
+        // Link count: the state length of the map's program, else the highest link index + 1.
+        let links = logic
+            .and_then(|lg| lg.phases.first())
+            .map(|p| p.state.chars().count())
+            .unwrap_or_else(|| map.tl_links(tl_id).iter().map(|k| k.link_index + 1).max().unwrap_or(0));
+        let (phases, base_offset, replaced) = match &l.phases {
+            Some(ps) => {
+                if ps.is_empty() {
+                    return Err(ctx.err(format!("{f}.phases"), "[]", "needs at least one phase"));
+                }
+                let mut phases = Vec::with_capacity(ps.len());
+                for (k, p) in ps.iter().enumerate() {
+                    let pf = format!("{f}.phases[{k}]");
+                    let n = p.state.chars().count();
+                    if n != links {
+                        return Err(ctx.err(
+                            format!("{pf}.state"),
+                            format!("\"{}\"", p.state),
+                            format!("has {n} characters; light `{tl_id}` controls {links} links (one character per link index)"),
+                        ));
+                    }
+                    if let Some(c) = p.state.chars().find(|c| !"rygGsuoO".contains(*c)) {
+                        return Err(ctx.err(
+                            format!("{pf}.state"),
+                            format!("\"{}\"", p.state),
+                            format!("unknown signal character `{c}` (use SUMO's r y g G s u o O)"),
+                        ));
+                    }
+                    let duration_s = ctx.positive(&format!("{pf}.duration_s"), p.duration_s)?;
+                    phases.push(crate::map::TlPhase { duration_s, state: p.state.clone() });
+                }
+                (phases, 0.0, true)
+            }
+            None => match logic {
+                Some(lg) if !lg.phases.is_empty() && lg.cycle_s() > 0.0 => {
+                    (lg.phases.clone(), lg.offset_s, false)
+                }
+                _ => {
+                    return Err(ctx.err(
+                        format!("{f}.tls"),
+                        format!("\"{tl_id}\""),
+                        "the map has no timed program for this light; give `phases`",
+                    ))
+                }
+            },
+        };
+        let offset_s = match (l.offset_s, l.start_phase, l.phase_elapsed_s) {
+            (Some(_), Some(k), _) => {
+                return Err(ctx.err(
+                    &f,
+                    format!("start_phase = {k}"),
+                    "give `offset_s` or `start_phase`, not both",
+                ))
+            }
+            (_, None, Some(e)) => {
+                return Err(ctx.err(
+                    format!("{f}.phase_elapsed_s"),
+                    e,
+                    "`phase_elapsed_s` goes with `start_phase`",
+                ))
+            }
+            (Some(o), None, None) => base_offset + ctx.finite(&format!("{f}.offset_s"), o)?,
+            (None, Some(k), e) => {
+                if k >= phases.len() {
+                    return Err(ctx.err(
+                        format!("{f}.start_phase"),
+                        k,
+                        format!("light `{tl_id}` has {} phases (0-based index)", phases.len()),
+                    ));
+                }
+                let e = ctx.nonneg(&format!("{f}.phase_elapsed_s"), e.unwrap_or(0.0))?;
+                if e >= phases[k].duration_s {
+                    return Err(ctx.err(
+                        format!("{f}.phase_elapsed_s"),
+                        e,
+                        format!("must be below the phase's duration {} s", phases[k].duration_s),
+                    ));
+                }
+                let before: f64 = phases[..k].iter().map(|p| p.duration_s).sum();
+                -(before + e)
+            }
+            (None, None, None) if replaced => 0.0,
+            (None, None, None) => {
+                return Err(ctx.err(
+                    &f,
+                    format!("tls = \"{tl_id}\""),
+                    "give one of `offset_s`, `start_phase` or `phases`",
+                ))
+            }
+        };
+        out.push(LightProgram { tl_id: tl_id.to_string(), offset_s, phases, replaced });
+    }
+    Ok(out)
+}
+
+/// Default length of a lane change along the path, m.
+pub const LANE_CHANGE_LENGTH_M: f64 = 20.0;
+
+/// Applies `lane_changes` to a route actor's path `full` (over `lanes`, cut later to
+/// [`s0`, `s1`]): from `s0 + at_s` the actor blends over `length_m` (cosine lateral profile)
+/// from its lane onto `to_lane`, a neighbour lane of the same edge, and then follows the route's
+/// remaining edges from `to_lane` along the lane graph (its connections; where `to_lane` does
+/// not lead on, the router's own lane change is kept). Returns the new path and its end.
+#[allow(clippy::too_many_arguments)]
+fn apply_lane_changes(
+    ctx: &Ctx<'_>,
+    field: &str,
+    full: Polyline,
+    lanes: &[LaneIdx],
+    s0: f64,
+    s1: f64,
+    changes: &[LaneChangeSpec],
+    vclass: VClass,
+) -> Result<(Polyline, f64)> {
+    let map = ctx.map;
+    let mut cur = full;
+    let mut s1 = s1;
+    let mut lanes: Vec<LaneIdx> = lanes.to_vec();
+    let mut done_s = s0;
+    for (k, c) in changes.iter().enumerate() {
+        let f = format!("{field}.lane_changes[{k}]");
+        let at_s = ctx.nonneg(&format!("{f}.at_s"), c.at_s)?;
+        let len = ctx.positive(&format!("{f}.length_m"), c.length_m.unwrap_or(LANE_CHANGE_LENGTH_M))?;
+        let at = s0 + at_s;
+        if at < done_s - 1e-6 {
+            return Err(ctx.err(
+                format!("{f}.at_s"),
+                at_s,
+                format!("starts before the previous lane change ends (at_s {:.1} m)", done_s - s0),
+            ));
+        }
+        if at + len > s1 + 1e-6 {
+            return Err(ctx.err(
+                format!("{f}.at_s"),
+                at_s,
+                format!(
+                    "the lane change (ending at {:.1} m) runs past the end of the path ({:.1} m)",
+                    at_s + len,
+                    s1 - s0
+                ),
+            ));
+        }
+        let p = cur.point_at(at);
+        // The lane the actor is on at `at`: the nearest lane of a normal edge of the route,
+        // with the point inside it (not beyond its ends, i.e. not in a junction).
+        let from = lanes
+            .iter()
+            .copied()
+            .filter(|&l| map.lane_function(l) == EdgeFunction::Normal)
+            .filter_map(|l| {
+                let sh = &map.lanes[l].shape;
+                let pr = sh.project(p)?;
+                (pr.s > 1e-6 && pr.s < sh.length() - 1e-6 && pr.distance <= 0.5 * map.lanes[l].width_m + 0.5)
+                    .then_some((pr.distance, l))
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))
+            .map(|x| x.1)
+            .ok_or_else(|| {
+                ctx.err(
+                    format!("{f}.at_s"),
+                    at_s,
+                    format!(
+                        "the path is not on a lane of a normal edge there ({:.1}, {:.1}): inside a junction?",
+                        p.x, p.y
+                    ),
+                )
+            })?;
+        let to = ctx.lane(&format!("{f}.to_lane"), &c.to_lane)?;
+        let (lf, lt) = (&map.lanes[from], &map.lanes[to]);
+        if lt.edge != lf.edge || lf.index.abs_diff(lt.index) != 1 {
+            let neighbours: Vec<&str> = map.edges[lf.edge]
+                .lanes
+                .iter()
+                .map(|&l| &map.lanes[l])
+                .filter(|l| l.index.abs_diff(lf.index) == 1)
+                .map(|l| l.id.as_str())
+                .collect();
+            return Err(ctx.err(
+                format!("{f}.to_lane"),
+                format!("\"{}\"", c.to_lane),
+                format!(
+                    "not a neighbour of lane `{}` the actor is on at at_s = {at_s} (neighbours: {})",
+                    lf.id,
+                    if neighbours.is_empty() { "none".to_string() } else { neighbours.join(", ") }
+                ),
+            ));
+        }
+        if !lt.allow.contains(vclass) {
+            return Err(ctx.err(
+                format!("{f}.to_lane"),
+                format!("\"{}\"", c.to_lane),
+                format!("lane does not allow vClass {}", vclass.sumo_name()),
+            ));
+        }
+        // The route's normal edges from the current one on.
+        let pos = lanes.iter().position(|&l| l == from).unwrap_or(0);
+        let mut rem: Vec<EdgeIdx> = Vec::new();
+        for &l in &lanes[pos..] {
+            let e = map.lanes[l].edge;
+            if map.edges[e].function == EdgeFunction::Normal && rem.last() != Some(&e) {
+                rem.push(e);
+            }
+        }
+        let next_lanes = map
+            .route_lanes_for(&rem, Some(to), vclass)
+            .map_err(|e| map_err(ctx, &format!("{f}.to_lane"), &format!("\"{}\"", c.to_lane), e))?;
+        let next = map.lanes_polyline(&next_lanes);
+        let n_a = next.project(p).map_or(0.0, |q| q.s);
+        if n_a + len > next.length() {
+            return Err(ctx.err(
+                format!("{f}.length_m"),
+                len,
+                format!(
+                    "the lane change does not fit on the rest of the route ({:.1} m left)",
+                    next.length() - n_a
+                ),
+            ));
+        }
+        let end_pt = cur.point_at(s1);
+        let mut pts: Vec<Vec2> = cur.slice(0.0, at).points().to_vec();
+        let n = (len / 1.0).ceil().max(2.0) as usize;
+        for i in 1..=n {
+            let u = len * i as f64 / n as f64;
+            let w = 0.5 - 0.5 * (std::f64::consts::PI * u / len).cos();
+            pts.push(cur.point_at(at + u).lerp(next.point_at(n_a + u), w));
+        }
+        pts.extend_from_slice(&next.slice(n_a + len, next.length()).points()[1..]);
+        let composite = Polyline::new(pts);
+        let tail_left = next.length() - next.project(end_pt).map_or(next.length(), |q| q.s);
+        s1 = (composite.length() - tail_left).clamp(at + len, composite.length());
+        done_s = at + len;
+        cur = composite;
+        lanes = next_lanes;
+    }
+    Ok((cur, s1))
 }

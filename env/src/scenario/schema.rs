@@ -58,6 +58,9 @@ pub struct ScenarioFile {
     /// Background traffic (`[traffic]`, see `docs/traffic.md`).
     #[serde(default)]
     pub traffic: Option<crate::scenario::traffic::TrafficSpec>,
+    /// Traffic-light program overrides (`[[lights]]`), applied in every traffic mode.
+    #[serde(default)]
+    pub lights: Vec<LightOverrideSpec>,
 }
 
 /// A point (and optionally a heading) either on a lane (`lane` + `s` + `offset_m`) or in
@@ -201,6 +204,69 @@ pub struct TriggerSpec {
     pub ego_within_m: Option<f64>,
     #[serde(default)]
     pub of: Option<OfSpec>,
+    /// Time-to-conflict trigger: fires when the ego is expected to reach the projection of `of`
+    /// on its route within this many seconds (route distance ÷ max(ego speed, 0.5 m/s)).
+    #[serde(default)]
+    pub ego_eta_s: Option<f64>,
+    /// Chained trigger: name of the actor whose `event` this one follows.
+    #[serde(default)]
+    pub after: Option<String>,
+    /// Chained trigger: seconds after the other actor's event (default 0).
+    #[serde(default)]
+    pub delay_s: Option<f64>,
+    /// Chained trigger: which event of the other actor (default `start`).
+    #[serde(default)]
+    pub event: Option<ChainEventSpec>,
+}
+
+/// What a chained trigger follows.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ChainEventSpec {
+    /// The other actor's start trigger fired.
+    #[default]
+    Start,
+    /// The other actor began its brake event.
+    Brake,
+    /// The other actor reached the end of its path.
+    End,
+}
+
+/// A lane change of a `route` actor: from arc length `at_s` along its path it moves over
+/// `length_m` into `to_lane`, a neighbour lane of the edge it is on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LaneChangeSpec {
+    pub at_s: f64,
+    pub to_lane: String,
+    /// Length of the manoeuvre along the path (default 20 m).
+    #[serde(default)]
+    pub length_m: Option<f64>,
+}
+
+/// One phase of a replacement light program.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LightPhaseSpec {
+    /// SUMO state string, one character per link index.
+    pub state: String,
+    pub duration_s: f64,
+}
+
+/// `[[lights]]`: override of one traffic light's program: `offset_s` shifts it, `start_phase`
+/// (+ `phase_elapsed_s`) sets where it is at t = 0, `phases` replaces it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LightOverrideSpec {
+    pub tls: String,
+    #[serde(default)]
+    pub offset_s: Option<f64>,
+    #[serde(default)]
+    pub start_phase: Option<usize>,
+    #[serde(default)]
+    pub phase_elapsed_s: Option<f64>,
+    #[serde(default)]
+    pub phases: Option<Vec<LightPhaseSpec>>,
 }
 
 /// A hard-braking event: once at arc length `at_s` of the path, or `after_s` seconds after the
@@ -260,6 +326,9 @@ pub struct ActorSpec {
     pub height_m: Option<f64>,
     #[serde(default)]
     pub color: Option<[u8; 3]>,
+    /// Lane changes / cut-ins of a `route` actor, in path order.
+    #[serde(default)]
+    pub lane_changes: Vec<LaneChangeSpec>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]

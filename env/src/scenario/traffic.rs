@@ -119,6 +119,12 @@ pub struct TrafficVehicleSpec {
     pub depart_pos_m: Option<f64>,
     #[serde(default)]
     pub depart_speed: Option<SpeedChoice>,
+    /// This vehicle's maximum speed, m/s (a derived vType; native: caps the desired speed).
+    #[serde(default)]
+    pub max_speed_mps: Option<f64>,
+    /// This vehicle's speed factor on the lane speed limit (SUMO `speedFactor`).
+    #[serde(default)]
+    pub speed_factor: Option<f64>,
 }
 
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -150,6 +156,12 @@ pub struct TrafficFlowSpec {
     pub depart_pos_m: Option<f64>,
     #[serde(default)]
     pub depart_speed: Option<SpeedChoice>,
+    /// Maximum speed of the flow's vehicles, m/s.
+    #[serde(default)]
+    pub max_speed_mps: Option<f64>,
+    /// Speed factor of the flow's vehicles (each gets exactly this factor).
+    #[serde(default)]
+    pub speed_factor: Option<f64>,
 }
 
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -210,6 +222,8 @@ pub struct DemandVehicle {
     pub depart_lane: LaneChoice,
     pub depart_pos_m: Option<f64>,
     pub depart_speed: SpeedChoice,
+    /// Exact speed factor of this vehicle (SUMO's vehicle attribute; also in its vType).
+    pub speed_factor: Option<f64>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -230,6 +244,7 @@ pub struct DemandFlow {
     pub depart_lane: LaneChoice,
     pub depart_pos_m: Option<f64>,
     pub depart_speed: SpeedChoice,
+    pub speed_factor: Option<f64>,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -440,6 +455,57 @@ impl Rx<'_> {
             )
         })
     }
+    /// Per-vehicle `max_speed_mps` / `speed_factor`: a vType derived from `base` (id
+    /// `<base>@<vehicle or flow id>`, every attribute copied, `maxSpeed` / `speedFactor`
+    /// replaced) so that SUMO and the native model read the same values. Returns the type to
+    /// use and the exact speed factor for SUMO's vehicle attribute.
+    fn speed_vtype(
+        &self,
+        field: &str,
+        vtypes: &mut Vec<VType>,
+        base: usize,
+        id: &str,
+        max_speed: Option<f64>,
+        factor: Option<f64>,
+    ) -> Result<(usize, Option<f64>)> {
+        if max_speed.is_none() && factor.is_none() {
+            return Ok((base, None));
+        }
+        let mut t = vtypes[base].clone();
+        let mut set = |key: &str, v: f64| match t.attrs.iter_mut().find(|(k, _)| k == key) {
+            Some(a) => a.1 = format!("{v}"),
+            None => t.attrs.push((key.to_string(), format!("{v}"))),
+        };
+        if let Some(m) = max_speed {
+            if !(m.is_finite() && m > 0.0) {
+                return Err(self.err(format!("{field}.max_speed_mps"), m, "must be a finite number > 0"));
+            }
+            set("maxSpeed", m);
+        }
+        if let Some(f) = factor {
+            if !(f.is_finite() && f > 0.0 && f <= 5.0) {
+                return Err(self.err(format!("{field}.speed_factor"), f, "must lie in (0, 5]"));
+            }
+            set("speedFactor", f);
+        }
+        t.max_speed_mps = max_speed.unwrap_or(t.max_speed_mps);
+        t.speed_factor = factor.unwrap_or(t.speed_factor);
+        t.id = format!("{}@{id}", t.id);
+        let new_id = t.id.clone();
+        if vtypes.iter().any(|v| v.id == new_id) {
+            return Err(self.err(
+                format!("{field}.id"),
+                format!("\"{id}\""),
+                format!("vehicle type id `{new_id}` exists already"),
+            ));
+        }
+        match t.attrs.iter_mut().find(|(k, _)| k == "id") {
+            Some(a) => a.1 = new_id,
+            None => t.attrs.insert(0, ("id".into(), new_id)),
+        }
+        vtypes.push(t);
+        Ok((vtypes.len() - 1, factor))
+    }
     fn lane(&self, field: &str, l: &Option<LaneChoice>) -> Result<LaneChoice> {
         match l {
             None => Ok(LaneChoice::Named("best".into())),
@@ -510,7 +576,7 @@ pub fn resolve_traffic(
             (p.display().to_string(), text)
         }
     };
-    let vtypes = parse_vtypes(&vtypes_file, &text)
+    let mut vtypes = parse_vtypes(&vtypes_file, &text)
         .map_err(|e| rx.err("traffic.vtypes", format!("\"{vtypes_file}\""), e.to_string()))?;
     let warmup_s = rx.nonneg("traffic.warmup_s", spec.warmup_s, 0.0)?;
     let mut ids: Vec<String> = Vec::new();
@@ -531,13 +597,17 @@ pub fn resolve_traffic(
         let f = format!("traffic.vehicles[{i}]");
         let vtype = rx.vtype(&format!("{f}.vtype"), v.vtype.as_deref(), &vtypes)?;
         let edges = rx.route(&format!("{f}.route"), &v.route, vtypes[vtype].vclass)?;
+        let id = v.id.clone().unwrap_or_else(|| format!("veh{i}"));
+        let (vtype, speed_factor) =
+            rx.speed_vtype(&f, &mut vtypes, vtype, &id, v.max_speed_mps, v.speed_factor)?;
         let depart_s = v.depart_s.unwrap_or(0.0);
         if !(depart_s.is_finite() && depart_s >= -warmup_s) {
             return Err(rx.err(format!("{f}.depart_s"), depart_s, "must be a finite number ≥ −warmup_s"));
         }
         vehicles.push(DemandVehicle {
-            id: unique(format!("{f}.id"), v.id.clone().unwrap_or_else(|| format!("veh{i}")))?,
+            id: unique(format!("{f}.id"), id)?,
             vtype,
+            speed_factor,
             depart_pos_m: rx.depart_pos(&format!("{f}.depart_pos_m"), v.depart_pos_m, &edges)?,
             edges,
             depart_s,
@@ -553,6 +623,9 @@ pub fn resolve_traffic(
         names.extend(fl.via.iter().cloned());
         names.push(fl.to.clone());
         let edges = rx.route(&format!("{f}.from/via/to"), &names, vtypes[vtype].vclass)?;
+        let id = fl.id.clone().unwrap_or_else(|| format!("flow{i}"));
+        let (vtype, speed_factor) =
+            rx.speed_vtype(&f, &mut vtypes, vtype, &id, fl.max_speed_mps, fl.speed_factor)?;
         let rate = match (fl.vehs_per_hour, fl.probability) {
             (Some(v), None) if v.is_finite() && v > 0.0 => FlowRate::PerHour(v),
             (None, Some(p)) if p.is_finite() && p > 0.0 && p <= 1.0 => FlowRate::Probability(p),
@@ -573,14 +646,24 @@ pub fn resolve_traffic(
             return Err(rx.err(format!("{f}.end_s"), end_s, "must be a finite number > begin_s"));
         }
         flows.push(DemandFlow {
-            id: unique(format!("{f}.id"), fl.id.clone().unwrap_or_else(|| format!("flow{i}")))?,
+            id: unique(format!("{f}.id"), id)?,
             vtype,
+            speed_factor,
             depart_pos_m: rx.depart_pos(&format!("{f}.depart_pos_m"), fl.depart_pos_m, &edges)?,
             edges,
             rate,
             begin_s,
             end_s,
-            number: fl.number,
+            number: match (fl.number, fl.probability) {
+                (Some(n), Some(_)) => {
+                    return Err(rx.err(
+                        format!("{f}.number"),
+                        n,
+                        "`number` goes with `vehs_per_hour` (a probability flow ends at `end_s`)",
+                    ))
+                }
+                (n, _) => n,
+            },
             depart_lane: rx.lane(&format!("{f}.depart_lane"), &fl.depart_lane)?,
             depart_speed: rx.speed(&format!("{f}.depart_speed"), &fl.depart_speed)?,
         });
@@ -765,6 +848,7 @@ impl TrafficDemand {
                 depart_lane: LaneChoice::Index(lane_index as u32),
                 depart_pos_m: Some(pos),
                 depart_speed: SpeedChoice::Named("max".into()),
+                speed_factor: None,
             });
         }
         out
@@ -821,7 +905,10 @@ impl TrafficDemand {
         let trips = self.random_trips(map, seed, ego.start.pos, 20.0);
         for v in self.vehicles.iter().chain(&trips) {
             let depart = v.depart_s + shift;
-            let pos = v.depart_pos_m.map(|p| format!(" departPos=\"{p:.3}\"")).unwrap_or_default();
+            let mut pos = v.depart_pos_m.map(|p| format!(" departPos=\"{p:.3}\"")).unwrap_or_default();
+            if let Some(f) = v.speed_factor {
+                let _ = write!(pos, " speedFactor=\"{f}\"");
+            }
             entries.push((
                 depart,
                 format!(
@@ -840,12 +927,23 @@ impl TrafficDemand {
                 FlowRate::PerHour(v) => format!("vehsPerHour=\"{v}\""),
                 FlowRate::Probability(p) => format!("probability=\"{p}\""),
             };
-            let number = f.number.map(|n| format!(" number=\"{n}\"")).unwrap_or_default();
-            let pos = f.depart_pos_m.map(|p| format!(" departPos=\"{p:.3}\"")).unwrap_or_default();
+            // SUMO takes `end` or `number`, not both: a capped flow gets the departures that
+            // fall before `end` as its `number` (as the native model counts them).
+            let end_or_number = match (f.number, f.rate) {
+                (Some(n), FlowRate::PerHour(v)) => {
+                    let before_end = ((f.end_s - f.begin_s) * v / 3600.0 - 1e-9).ceil().max(1.0) as u32;
+                    format!("number=\"{}\"", n.min(before_end))
+                }
+                _ => format!("end=\"{e:.2}\""),
+            };
+            let mut pos = f.depart_pos_m.map(|p| format!(" departPos=\"{p:.3}\"")).unwrap_or_default();
+            if let Some(sf) = f.speed_factor {
+                let _ = write!(pos, " speedFactor=\"{sf}\"");
+            }
             entries.push((
                 b,
                 format!(
-                    "    <flow id=\"{}\" type=\"{}\" begin=\"{b:.2}\" end=\"{e:.2}\" {rate}{number} departLane=\"{}\" departSpeed=\"{}\"{pos}>\n        <route edges=\"{}\"/>\n    </flow>\n",
+                    "    <flow id=\"{}\" type=\"{}\" begin=\"{b:.2}\" {end_or_number} {rate} departLane=\"{}\" departSpeed=\"{}\"{pos}>\n        <route edges=\"{}\"/>\n    </flow>\n",
                     xml_escape(&f.id),
                     xml_escape(&self.vtypes[f.vtype].id),
                     fmt_lane(&f.depart_lane),

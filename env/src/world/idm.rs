@@ -183,7 +183,7 @@ impl IdmTraffic {
         let map = scenario.map.clone();
         Ok(IdmTraffic {
             tl_ids: map.tl_ids().into_iter().map(str::to_string).collect(),
-            lights: LightState::new(&map),
+            lights: LightState::with_programs(&map, &scenario.lights),
             demand: scenario.traffic.clone(),
             ego_start: scenario.ego.start.pos,
             map,
@@ -235,6 +235,7 @@ impl IdmTraffic {
                         depart_lane: f.depart_lane.clone(),
                         depart_pos_m: f.depart_pos_m,
                         depart_speed: f.depart_speed.clone(),
+                        speed_factor: f.speed_factor,
                     });
                 }
             }

@@ -1,4 +1,5 @@
-//! Fixed-time traffic lights: each light runs its first (default) `tlLogic` program from t = 0.
+//! Fixed-time traffic lights: each light runs its first (default) `tlLogic` program from t = 0,
+//! or the scenario's `[[lights]]` override of it ([`LightState::with_programs`]).
 //!
 //! Cycle position at time t is (t − offset) mod cycle, so with offset = 10 the first phase
 //! starts at t = 10 s (SUMO's meaning of `offset`). Actuated programs run their phases at the
@@ -9,6 +10,7 @@
 //! straight is red shows green; use [`LightState::link_color`] for the exact colour of one link.
 
 use crate::map::{LaneIdx, Network};
+use crate::scenario::LightProgram;
 use crate::view::{LightColor, TrafficLightView};
 use smallvec::SmallVec;
 
@@ -98,14 +100,23 @@ pub struct LightState {
 
 impl LightState {
     pub fn new(map: &Network) -> LightState {
+        Self::with_programs(map, &[])
+    }
+
+    /// Like [`LightState::new`], with the scenario's `[[lights]]` overrides replacing those
+    /// lights' programs and offsets.
+    pub fn with_programs(map: &Network, overrides: &[LightProgram]) -> LightState {
         let heads_spec = signal_heads(map);
         let mut tl_ids: Vec<String> = Vec::new();
         let mut programs = Vec::new();
         for id in map.tl_ids() {
             tl_ids.push(id.to_string());
-            let (offset_s, phases) = match map.tl_logic(id) {
-                Some(l) => (l.offset_s, l.phases.as_slice()),
-                None => (0.0, &[][..]),
+            let (offset_s, phases) = match overrides.iter().find(|o| o.tl_id == id) {
+                Some(o) => (o.offset_s, o.phases.as_slice()),
+                None => match map.tl_logic(id) {
+                    Some(l) => (l.offset_s, l.phases.as_slice()),
+                    None => (0.0, &[][..]),
+                },
             };
             let mut ends = Vec::with_capacity(phases.len());
             let mut acc = 0.0;

@@ -4,7 +4,8 @@
 //! 2. advance the ego (kinematic bicycle, [`vehicle`]);
 //! 3. advance time;
 //! 4. traffic lights ([`lights`]);
-//! 5. actors in id order (triggers, scripted paths, brake events);
+//! 5. scenario actors (triggers, scripted paths, brake events) in id order, except that an actor
+//!    with a chained trigger steps after the actor it follows;
 //! 6. collisions (rapier2d, [`collision`]);
 //! 7. off-road test at the ego centre.
 //!
@@ -29,7 +30,10 @@ pub use vehicle::{longitudinal_accel, sanitize_control, step_bicycle, EgoState, 
 
 use crate::geom::{Pose, Vec2};
 use crate::map::Network;
-use crate::scenario::{ActorMotion, AtEnd, BrakeEvent, BrakeWhen, ResolvedScenario, ScriptedPath, Trigger};
+use crate::scenario::{
+    ActorMotion, AtEnd, BrakeEvent, BrakeWhen, ChainEvent, ResolvedScenario, ScriptedPath, Trigger,
+    ETA_MIN_SPEED_MPS,
+};
 use crate::view::{ActorKind, ActorView, ContactClass, LightColor, SignView, TrafficLightView};
 use crate::{Error, Result, DT_S};
 use collision::CollisionWorld;
@@ -102,6 +106,9 @@ struct ActorRt {
     phase: Phase,
     triggered_at_s: f64,
     brake_pending: bool,
+    /// When its brake event began / it reached its path end (∞ = not yet), for chained triggers.
+    brake_at_s: f64,
+    end_at_s: f64,
     /// Removed from the world (end of path with `at_end = remove`, or despawned).
     removed: bool,
     /// Traffic vehicles: the last frame that listed it, and its signal bits.
@@ -131,6 +138,13 @@ pub struct World {
     /// Traffic key → actor id of the vehicles present.
     traffic_ids: BTreeMap<u64, u32>,
     traffic_frames: u64,
+    /// Scenario actors in stepping order: chained actors after the actor they follow (so a
+    /// chain fires in the tick of its event), otherwise by id.
+    step_order: Vec<usize>,
+    /// The ego route and the ego's progress along it (time-to-conflict triggers).
+    ego_route: crate::geom::Polyline,
+    ego_route_s: f64,
+    track_route: bool,
 }
 
 /// Smooth heading along a path: direction of the chord over ±`h` around `s`.
@@ -197,12 +211,33 @@ impl World {
                 phase: Phase::Waiting,
                 triggered_at_s: 0.0,
                 brake_pending,
+                brake_at_s: f64::INFINITY,
+                end_at_s: f64::INFINITY,
                 removed: false,
                 traffic_frame: 0,
                 signals: 0,
             });
         }
         let scenario_actors = actors.len() as u32;
+        // Chain depth (cycles are rejected at load; the bound keeps a hand-built one finite).
+        let depth = |mut i: usize| {
+            let mut d = 0usize;
+            while let ActorMotion::Scripted(p) = &scenario.actors[i].motion {
+                match p.trigger {
+                    Trigger::After { actor, .. } if d < scenario.actors.len() => {
+                        i = actor;
+                        d += 1;
+                    }
+                    _ => break,
+                }
+            }
+            d
+        };
+        let mut step_order: Vec<usize> = (0..actors.len()).collect();
+        step_order.sort_by_key(|&i| (depth(i), i));
+        let track_route = scenario.actors.iter().any(
+            |a| matches!(&a.motion, ActorMotion::Scripted(p) if matches!(p.trigger, Trigger::EgoEta { .. })),
+        );
         let mut w = World {
             map: scenario.map.clone(),
             params,
@@ -211,7 +246,7 @@ impl World {
             ego_view,
             views: Vec::with_capacity(actors.len()),
             actors,
-            lights: LightState::new(&scenario.map),
+            lights: LightState::with_programs(&scenario.map, &scenario.lights),
             signs: scenario.signs.clone(),
             tick: 0,
             collision,
@@ -221,7 +256,12 @@ impl World {
             traffic_buf: TrafficFrame::default(),
             traffic_ids: BTreeMap::new(),
             traffic_frames: 0,
+            step_order,
+            ego_route: scenario.ego.route.clone(),
+            ego_route_s: 0.0,
+            track_route,
         };
+        w.track_ego_route();
         w.rebuild_views();
         Ok(w)
     }
@@ -251,14 +291,19 @@ impl World {
         // 5. Actors.
         let mut triggered = Vec::new();
         let ego_pos = self.ego.pose.pos;
+        self.track_ego_route();
         let mut any_removed = false;
-        for a in &mut self.actors {
-            if a.removed {
+        for k in 0..self.step_order.len() {
+            let i = self.step_order[k];
+            if self.actors[i].removed {
                 continue;
             }
+            let Motion::Scripted(p) = &self.actors[i].motion else { continue };
+            let fire = self.actors[i].phase == Phase::Waiting && self.trigger_fires(&p.trigger, t);
+            let a = &mut self.actors[i];
             let Motion::Scripted(p) = &a.motion else { continue };
             let before = a.view.pose;
-            if step_scripted(
+            let removed = step_scripted(
                 a.view.id,
                 &mut a.view,
                 &mut a.s,
@@ -267,9 +312,16 @@ impl World {
                 &mut a.brake_pending,
                 p,
                 t,
-                ego_pos,
+                fire,
                 &mut triggered,
-            ) {
+            );
+            if a.brake_at_s.is_infinite() && matches!(a.phase, Phase::Braking | Phase::Holding { .. }) {
+                a.brake_at_s = t;
+            }
+            if a.end_at_s.is_infinite() && (removed || a.phase == Phase::Done) {
+                a.end_at_s = t;
+            }
+            if removed {
                 a.removed = true;
                 any_removed = true;
                 self.collision.set_enabled(a.collider, false);
@@ -277,6 +329,7 @@ impl World {
                 self.collision.set_pose(a.collider, a.view.pose);
             }
         }
+        triggered.sort_unstable();
         if any_removed {
             self.rebuild_views();
         } else {
@@ -308,6 +361,48 @@ impl World {
             triggered,
             ran_red_light,
         })
+    }
+
+    /// Updates the ego's progress along its route (searched near the last value, so a route
+    /// passing near itself is not confused).
+    fn track_ego_route(&mut self) {
+        if !self.track_route {
+            return;
+        }
+        let p = self.ego.pose.pos;
+        let s0 = self.ego_route_s;
+        if let Some(pr) = self.ego_route.project_within(p, s0 - 5.0, s0 + 30.0) {
+            // Off the window (e.g. after a teleport in a test): take the global projection.
+            let pr = if pr.distance > 10.0 { self.ego_route.project(p).unwrap_or(pr) } else { pr };
+            self.ego_route_s = pr.s;
+        }
+    }
+
+    /// The ego's arc length along its route (tracked while a time-to-conflict trigger exists).
+    pub fn ego_route_s(&self) -> f64 {
+        self.ego_route_s
+    }
+
+    /// Whether a waiting actor's start trigger fires at time `t`.
+    fn trigger_fires(&self, trigger: &Trigger, t: f64) -> bool {
+        match *trigger {
+            Trigger::Time(t0) => t >= t0 - 1e-9,
+            Trigger::EgoWithin { radius_m, point } => self.ego.pose.pos.dist_sq(point) <= radius_m * radius_m,
+            Trigger::EgoEta { eta_s, route_s, .. } => {
+                let d = route_s - self.ego_route_s;
+                d > 0.0 && d / self.ego.speed_mps.max(ETA_MIN_SPEED_MPS) <= eta_s
+            }
+            Trigger::After { actor, event, delay_s } => {
+                let Some(o) = self.actors.get(actor) else { return false };
+                let at = match event {
+                    ChainEvent::Start if o.phase != Phase::Waiting => o.triggered_at_s,
+                    ChainEvent::Start => f64::INFINITY,
+                    ChainEvent::Brake => o.brake_at_s,
+                    ChainEvent::End => o.end_at_s,
+                };
+                t >= at + delay_s - 1e-9
+            }
+        }
     }
 
     fn actor_index(&self, id: u32) -> Option<usize> {
@@ -367,6 +462,8 @@ impl World {
             phase: Phase::Moving,
             triggered_at_s: self.time_s(),
             brake_pending: false,
+            brake_at_s: f64::INFINITY,
+            end_at_s: f64::INFINITY,
             removed: false,
             traffic_frame: 0,
             signals: 0,
@@ -472,6 +569,8 @@ impl World {
                         phase: Phase::Moving,
                         triggered_at_s: self.time_s(),
                         brake_pending: false,
+                        brake_at_s: f64::INFINITY,
+                        end_at_s: f64::INFINITY,
                         removed: false,
                         traffic_frame: gen,
                         signals: a.signals,
@@ -601,7 +700,8 @@ fn crossed_red_stop_line(heads: &[TrafficLightView], from: Vec2, to: Pose) -> bo
     })
 }
 
-/// One scripted-actor step; returns true when the actor leaves the world.
+/// One scripted-actor step (`fire`: its start trigger holds now); returns true when the actor
+/// leaves the world.
 #[allow(clippy::too_many_arguments)]
 fn step_scripted(
     id: u32,
@@ -612,15 +712,11 @@ fn step_scripted(
     brake_pending: &mut bool,
     p: &ScriptedPath,
     t: f64,
-    ego_pos: Vec2,
+    fire: bool,
     triggered: &mut Vec<u32>,
 ) -> bool {
     let prev_speed = view.speed_mps;
     if *phase == Phase::Waiting {
-        let fire = match p.trigger {
-            Trigger::Time(t0) => t >= t0 - 1e-9,
-            Trigger::EgoWithin { radius_m, point } => ego_pos.dist_sq(point) <= radius_m * radius_m,
-        };
         if !fire {
             return false;
         }

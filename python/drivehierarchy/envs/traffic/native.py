@@ -32,9 +32,9 @@ _ONE_PER_PROCESS = (
 
 def native_sumo_paths() -> tuple[Path, Path, Path]:
     """(shim, libsumocpp, sumo binary) of this installation."""
-    from sumo import SUMO_HOME
+    from drivehierarchy.scenarios import sumo_runtime_home
 
-    home = Path(SUMO_HOME)
+    home = Path(sumo_runtime_home())
     libs = [home / d / "libsumocpp.so" for d in ("lib64", "lib")]
     lib = next((p for p in libs if p.exists()), libs[0])
     return Path(_core.__file__).parent / _core.NATIVE_SUMO_SHIM, lib, home / "bin" / "sumo"

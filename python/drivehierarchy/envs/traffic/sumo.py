@@ -96,11 +96,15 @@ class SumoTraffic:
         warmup_s: float,
         movers: list[tuple[int, float, float, float, float, int]],
         light_sync: list[tuple[str, int, float]] = (),  # type: ignore[assignment]
+        programs: list[tuple[str, list[tuple[str, float]]]] = (),  # type: ignore[assignment]
     ) -> tuple[dict[str, Any], list[Any], dict[str, Any]]:
         """(Re)starts SUMO for an episode; runs the warm-up; returns the t = 0 frame.
 
-        `light_sync` = (light, phase, remaining s) of each light at episode t = 0; set at the end
-        of the warm-up so the lights keep the timing the scenario was written for.
+        `programs` = (light, [(state, duration s), ...]) of the scenario's replacement light
+        programs (`[[lights]] phases`), installed before the warm-up. `light_sync` = (light,
+        phase, remaining s) of each light at episode t = 0 (the scenario's overrides included);
+        set at the end of the warm-up (also without one) so SUMO's lights keep the timing the
+        world's own light model has.
         """
         self.close()
         self._claim()
@@ -109,9 +113,9 @@ class SumoTraffic:
         routes = self._tmp / "traffic.rou.xml"
         routes.write_text(routes_xml, encoding="utf-8")
         errlog = self._tmp / "sumo_errors.log"
-        from sumo import SUMO_HOME
+        from drivehierarchy.scenarios import sumo_runtime_home
 
-        binary = str(Path(SUMO_HOME) / "bin" / "sumo")
+        binary = str(Path(sumo_runtime_home()) / "bin" / "sumo")
         cmd = [
             binary,
             "--net-file", net,
@@ -139,6 +143,14 @@ class SumoTraffic:
         self.steps = 0
         ls.simulation.subscribe([tc.VAR_DEPARTED_VEHICLES_IDS])
         self._tls = tuple(ls.trafficlight.getIDList())
+        for tl, phases in programs:
+            if tl not in self._tls:
+                raise SimulationError(f"light override: SUMO has no traffic light {tl!r}")
+            logic = ls.trafficlight.Logic(
+                "dh_override", 0, 0, [ls.trafficlight.Phase(float(d), state) for state, d in phases]
+            )
+            ls.trafficlight.setProgramLogic(tl, logic)
+            ls.trafficlight.setProgram(tl, "dh_override")
         for tl in self._tls:
             ls.trafficlight.subscribe(tl, [tc.TL_RED_YELLOW_GREEN_STATE])
         ls.vehicle.add(EGO_ID, EGO_ROUTE, typeID="dh_ego", depart="now")
@@ -148,11 +160,10 @@ class SumoTraffic:
             ls.simulationStep()
             self.steps += 1
             new.extend(self._departed())
-        if warmup_s > 0:
-            for tl, phase, remaining in light_sync:
-                if tl in self._tls:
-                    ls.trafficlight.setPhase(tl, phase)
-                    ls.trafficlight.setPhaseDuration(tl, remaining)
+        for tl, phase, remaining in light_sync:
+            if tl in self._tls:
+                ls.trafficlight.setPhase(tl, phase)
+                ls.trafficlight.setPhaseDuration(tl, remaining)
         self.sumo_time_s = ls.simulation.getTime()
         # Read once here (the subscription results predate the light sync above).
         state = tc.TL_RED_YELLOW_GREEN_STATE
