@@ -6,7 +6,6 @@ killed for real with SIGKILL."""
 from __future__ import annotations
 
 import json
-import multiprocessing
 import os
 import signal
 import threading
@@ -18,7 +17,7 @@ from conftest import short_scenarios
 from drivehierarchy import SimulationError
 from drivehierarchy.agents.vlm import VLMOptions
 from drivehierarchy.benchmark.r4 import runner
-from drivehierarchy.benchmark.r4.workers import WORKER_NAME
+from drivehierarchy.benchmark.r4.workers import WORKER_NAME, running_workers
 from drivehierarchy.envs.config import R4Config
 from drivehierarchy.testing.openai_server import ScriptedOpenAIServer, route_driver
 
@@ -27,10 +26,6 @@ OBSTACLES, SUMO, YIELDING = short_scenarios(3)
 
 def _opts(url: str, **kw) -> runner.RunOptions:
     return runner.RunOptions(agent="vlm", vlm=VLMOptions(base_url=url, model="test-model"), **kw)
-
-
-def _workers() -> list[multiprocessing.Process]:
-    return [c for c in multiprocessing.active_children() if c.name.startswith(WORKER_NAME)]
 
 
 def _scene(out: Path, key: str) -> dict:
@@ -54,7 +49,7 @@ def test_sumo_scenarios_run_at_once_in_workers_and_match_a_sequential_run(tmp_pa
     sent: list[tuple] = []  # what each request carried: its texts and images
 
     def policy(req):
-        seen.append({w.pid for w in _workers()})
+        seen.append(set(running_workers()))
         sent.append((req.user_texts, tuple(i.sha256 for i in req.images)))
         return route_driver(req)
 
@@ -67,7 +62,7 @@ def test_sumo_scenarios_run_at_once_in_workers_and_match_a_sequential_run(tmp_pa
     # Three SUMO scenarios at once, each in a worker of its own (a worker is started only when none
     # is free), gone once the run is over.
     assert max(len(s) for s in seen) == 3 and len(set().union(*seen)) == 3
-    assert _workers() == []
+    assert running_workers() == []
     assert [r["key"] for r in parallel] == [r["key"] for r in serial]
     for a, b in zip(serial, parallel, strict=True):
         assert a["vlm"]["decisions"] == b["vlm"]["decisions"] > 0
@@ -90,12 +85,12 @@ def test_a_worker_killed_mid_episode_fails_its_scenario_clearly_and_a_rerun_resu
 
     def killer(req):
         with lock:
-            live = _workers()
+            live = running_workers()
             if live and not killed:
                 sumo_requests["n"] += 1
                 if sumo_requests["n"] == 20:  # mid-episode: the SUMO scenario takes 100 decisions
-                    os.kill(live[0].pid, signal.SIGKILL)
-                    killed.append(live[0].pid)
+                    os.kill(live[0], signal.SIGKILL)
+                    killed.append(live[0])
         return route_driver(req)
 
     scenarios = [OBSTACLES, SUMO, YIELDING]
@@ -114,7 +109,7 @@ def test_a_worker_killed_mid_episode_fails_its_scenario_clearly_and_a_rerun_resu
         )
         assert "died" in json.loads((out / "scenes" / sumo_key / "error.json").read_text())["error"]
         assert not (out / "summary.json").exists()
-        assert _workers() == []
+        assert running_workers() == []
 
         logged: list[str] = []
         results = runner.evaluate(scenarios, out, _opts(url, jobs=3), log=logged.append)

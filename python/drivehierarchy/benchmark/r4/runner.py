@@ -752,6 +752,11 @@ async def evaluate_async(
             log(f"[{index[job.key]}/{len(jobs)}] {job.key}: done before, skipped")
         else:
             todo.append(job)
+    if opts.jobs > 1:
+        # Longest first (by the scenario's reference duration): the suite's end is not held up by
+        # long scenarios started last. Results do not depend on the order.
+        length = {p: expected_duration_s(p) for p in {j.scenario for j in todo}}
+        todo.sort(key=lambda j: -length[j.scenario])
     progress = _Progress(len(jobs), len(jobs) - len(todo), opts.progress, done)
     sem = asyncio.Semaphore(opts.jobs)
     aborted: list[dict[str, Any]] = []
@@ -854,6 +859,18 @@ def uses_sumo(scenario: Path, config: R4Config) -> bool:
     if mode is not None:
         return bool(mode == "sumo")
     return bool(_SUMO_MODE.search(scenario.read_text(encoding="utf-8")))
+
+
+_REFERENCE_DURATION = re.compile(r"^\s*reference_duration_s\s*=\s*([0-9.eE+-]+)", re.MULTILINE)
+
+
+def expected_duration_s(scenario: Path) -> float:
+    """The scenario's `reference_duration_s` (0 when it has none): a proxy for its length."""
+    m = _REFERENCE_DURATION.search(scenario.read_text(encoding="utf-8"))
+    try:
+        return float(m.group(1)) if m else 0.0
+    except ValueError:
+        return 0.0
 
 
 def evaluate(

@@ -1,27 +1,36 @@
 """Worker processes for scenarios with SUMO traffic in a concurrent `r4 evaluate`.
 
 libsumo runs one simulation per process, so scenarios with SUMO background traffic cannot share
-the harness's process. Each `SceneWorker` is a spawn-context process owning at most one env (and
-so one libsumo) at a time; the async harness drives it call by call (reset, build the message,
-step) while the scenario's VLM requests stay in the harness's process and its one `AsyncOpenAI`
-pool, so the server still batches across every scenario in flight. A scenario keeps its worker
-from start to end; between calls its world waits, frozen, as in the original.
+the harness's process. Each `SceneWorker` is a fresh interpreter (`python -m` this module: like a
+spawn-context process, but without re-running the caller's `__main__`, so a script calling
+`evaluate` needs no `if __name__ == "__main__"` guard) owning at most one env (and so one
+libsumo) at a time, talking over a socket pair with `multiprocessing.connection` framing. The
+async harness drives it call by call (reset, build the message, step) while the scenario's VLM
+requests stay in the harness's process and its one `AsyncOpenAI` pool, so the server still
+batches across every scenario in flight. A scenario keeps its worker from start to end; between
+calls its world waits, frozen, as in the original. The observation stays in the worker: only
+the built message (two JPEG data URLs), the step's info and the final record travel.
 
 A worker that dies (killed, SUMO crashed) is reported as `WorkerDied` for the scenario it was
 driving — on the next call, or within `POLL_S` of the death while a call is waiting — never a hang.
 The pool then starts a fresh worker for later scenarios. Workers exit when the harness's end of
-the pipe closes (including when the harness itself is killed).
+the socket closes (including when the harness itself is killed).
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import multiprocessing
+import os
 import pickle
+import socket
+import subprocess
+import sys
 import traceback
 from collections.abc import AsyncIterator, Callable
 from concurrent.futures import Executor
+from multiprocessing.connection import Connection
+from pathlib import Path
 from typing import Any
 
 from drivehierarchy._core import SimulationError
@@ -80,27 +89,39 @@ def _close(obj: Any) -> None:
 
 
 class SceneWorker:
-    """One worker process and the harness's end of its pipe. `request` blocks (run it in a
+    """One worker process and the harness's end of its socket. `request` blocks (run it in a
     thread); `call` is its async form."""
 
-    def __init__(self, ctx: Any, index: int) -> None:
-        parent, child = ctx.Pipe()
-        self.process = ctx.Process(target=_serve, args=(child,), name=f"{WORKER_NAME}-{index}", daemon=True)
-        self.process.start()
-        child.close()  # only the worker holds its end: its death reads as EOF here
-        self.conn = parent
+    def __init__(self, index: int) -> None:
+        here, there = socket.socketpair()
+        # The worker imports this very package (not whatever `drivehierarchy` its path finds first).
+        env = dict(os.environ)
+        root = str(Path(__file__).resolve().parents[3])
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
+        self.name = f"{WORKER_NAME}-{index}"
+        with there:
+            self.process = subprocess.Popen(
+                [sys.executable, "-m", __name__, str(there.fileno()), self.name],
+                pass_fds=[there.fileno()],
+                env=env,
+                stdin=subprocess.DEVNULL,
+            )
+        # Only the worker holds its end now: its death reads as EOF here.
+        self.conn = Connection(here.detach())
         self.scene: str | None = None  # the scenario it drives, for error messages
+        _LIVE.add(self.process)
 
     @property
     def alive(self) -> bool:
-        return bool(self.process.is_alive())
+        return self.process.poll() is None
 
     def _died(self, cause: BaseException | None = None) -> WorkerDied:
-        self.process.join(5)
-        code = self.process.exitcode
-        what = f"exit code {code}" if code is not None else "lost its pipe"
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            self.process.wait(5)
+        code = self.process.returncode
+        what = f"exit code {code}" if code is not None else "lost its socket"
         return WorkerDied(
-            f"worker process {self.process.name} (pid {self.process.pid}) driving "
+            f"worker process {self.name} (pid {self.process.pid}) driving "
             f"{self.scene or 'a scenario'} died ({what}); the scenario's SUMO simulation is gone"
         )
 
@@ -108,7 +129,7 @@ class SceneWorker:
         try:
             self.conn.send((op, target, args, kwargs))
             while not self.conn.poll(POLL_S):
-                if not self.process.is_alive():
+                if not self.alive:
                     raise self._died()
             reply = self.conn.recv()
         except (EOFError, OSError) as exc:
@@ -117,7 +138,7 @@ class SceneWorker:
             return reply[1]
         error: BaseException = reply[1]
         if hasattr(error, "add_note"):  # Python ≥ 3.11: the worker's traceback in the report
-            error.add_note(f"in {self.process.name} (pid {self.process.pid}):\n{reply[2]}")
+            error.add_note(f"in {self.name} (pid {self.process.pid}):\n{reply[2]}")
         raise error
 
     async def call(self, pool: Executor, op: str, target: Any, *args: Any, **kwargs: Any) -> Any:
@@ -126,27 +147,34 @@ class SceneWorker:
 
     def stop(self, timeout: float = 5.0) -> None:
         """Asks the worker to exit; kills it if it does not within `timeout`."""
-        if self.process.is_alive():
+        if self.alive:
             with contextlib.suppress(OSError, ValueError):
                 self.conn.send(("exit", None, (), {}))
-            self.process.join(timeout)
-        if self.process.is_alive():
-            self.process.kill()
-            self.process.join(timeout)
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                self.process.wait(timeout)
+        self.kill()
         self.conn.close()
 
     def kill(self) -> None:
-        if self.process.is_alive():
+        if self.alive:
             self.process.kill()
-            self.process.join(5)
+        self.process.wait()
+        _LIVE.discard(self.process)
+
+
+_LIVE: set[subprocess.Popen[bytes]] = set()
+
+
+def running_workers() -> list[int]:
+    """Pids of this process's live worker processes (diagnostics and tests)."""
+    return sorted(p.pid for p in _LIVE if p.poll() is None)
 
 
 class WorkerPool:
-    """Spawn-context workers started on demand (at most as many as scenarios using them at once)
+    """Workers started on demand (at most as many as scenarios using them at once)
     and reused across scenarios; a dead one is replaced."""
 
-    def __init__(self, start_method: str = "spawn") -> None:
-        self._ctx = multiprocessing.get_context(start_method)
+    def __init__(self) -> None:
         self._idle: list[SceneWorker] = []
         self._all: list[SceneWorker] = []
         self.started = 0
@@ -172,7 +200,7 @@ class WorkerPool:
                 self._all.remove(w)
 
     def _start(self) -> SceneWorker:
-        w = SceneWorker(self._ctx, self.started)
+        w = SceneWorker(self.started)
         self.started += 1
         self._all.append(w)
         return w
@@ -194,3 +222,15 @@ def make_remote(worker: SceneWorker, pool: Executor) -> Callable[..., Any]:
         return await worker.call(pool, "call", method, *args, **kwargs)
 
     return remote
+
+
+def main(argv: list[str] | None = None) -> int:
+    """`python -m drivehierarchy.benchmark.r4.workers FD NAME`: serve the harness on socket FD."""
+    args = sys.argv[1:] if argv is None else argv
+    conn = Connection(int(args[0]))
+    _serve(conn)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
