@@ -5,6 +5,8 @@ killed for real with SIGKILL."""
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import json
 import os
 import signal
@@ -15,7 +17,7 @@ import pytest
 
 from conftest import short_scenarios
 from drivehierarchy import SimulationError
-from drivehierarchy.agents.vlm import VLMOptions
+from drivehierarchy.agents.vlm import PayloadOptions, VLMOptions
 from drivehierarchy.benchmark.r4 import runner
 from drivehierarchy.benchmark.r4.workers import WORKER_NAME, running_workers
 from drivehierarchy.envs.config import R4Config
@@ -134,3 +136,39 @@ def test_expert_runs_sumo_scenarios_in_workers_too(tmp_path: Path) -> None:
         for x in (a, b):
             del x["score"]["meta"]["duration_system"]
         assert a["score"] == b["score"]
+
+
+def test_controls_frames_and_video_in_a_worker_match_the_harness_process(tmp_path: Path) -> None:
+    sent: dict[int, list[tuple]] = {1: [], 2: []}
+    current = {"jobs": 1}
+
+    def policy(req):
+        sent[current["jobs"]].append((req.user_texts, tuple(i.sha256 for i in req.images)))
+        return route_driver(req)
+
+    payload = PayloadOptions(corrupt="noise")  # seeded by the episode seed and the decision
+    with ScriptedOpenAIServer(policy) as url:
+        for jobs in (1, 2):
+            current["jobs"] = jobs
+            opts = _opts(url, jobs=jobs, frames=True, video=True)
+            opts.vlm = dataclasses.replace(opts.vlm, payload=payload)
+            (res,) = runner.evaluate([SUMO], tmp_path / str(jobs), opts, log=print)
+            scene = tmp_path / str(jobs) / "scenes" / res["key"]
+            n = res["vlm"]["decisions"]
+            assert len(list((scene / "frames").glob("*_front.png"))) == n
+            assert len(list((scene / "frames").glob("*_bev.png"))) == n
+            assert (scene / "episode.gif").stat().st_size > 10_000
+    assert sent[1] == sent[2] and len(sent[1]) == n
+    assert _scene(tmp_path / "1", res["key"]) == _scene(tmp_path / "2", res["key"])
+
+
+def test_latency_aware_in_a_worker(tmp_path: Path) -> None:
+    with ScriptedOpenAIServer(route_driver, latency_s=0.1) as url:
+        opts = _opts(url, jobs=2)
+        opts.vlm = dataclasses.replace(opts.vlm, latency_aware=True)
+        (res,) = runner.evaluate([SUMO], tmp_path / "late", opts, log=print)
+    log = [json.loads(x) for x in (tmp_path / "late" / "scenes" / res["key"] / "decisions.jsonl").open()]
+    assert all(d["held_ticks"] == round(d["latency_s"] / 0.05) >= 2 for d in log)
+    for a, b in itertools.pairwise(log):
+        assert b["tick"] - a["tick"] == a["held_ticks"] + 5
+    assert res["score"]["decisions"] == len(log) and res["score"]["parse_failures"] == 0
