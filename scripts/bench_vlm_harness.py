@@ -5,7 +5,11 @@
    served model typically takes per decision. Target: ≤ 5 %.
 2. Concurrency: `r4 evaluate --agent vlm` over the built-in suite × `--seeds` against the loopback
    test server (a separate process, scripted route driver, 200 ms per request) with `--jobs 1` and
-   `--jobs 16`. Target: ≥ 10× faster with 16 jobs.
+   `--jobs 16`. Target: ≥ 10× faster with 16 jobs. The suite's scenarios with SUMO traffic run in
+   worker processes with 16 jobs (in the harness's process with 1). Also printed: the bound the
+   scenarios' lengths allow (all decisions one after another / the longest-first schedule of the
+   same decisions on 16 slots, i.e. zero harness and server CPU) and the machine's load average,
+   since on a loaded machine the harness and the server compete for CPU.
 
     python scripts/bench_vlm_harness.py [--latency-ms 200] [--seeds 3] [--jobs 16] [--skip-serial]
 """
@@ -13,7 +17,9 @@
 from __future__ import annotations
 
 import argparse
+import heapq
 import json
+import os
 import socket
 import subprocess
 import sys
@@ -65,9 +71,20 @@ def run_suite(base_url: str, jobs: int, seeds: int, out: Path) -> tuple[float, d
         agent="vlm", vlm=VLMOptions(base_url=base_url, model="test-model"), jobs=jobs, seeds=seeds
     )
     t0 = time.perf_counter()
-    runner.evaluate(runner.suite_scenarios("builtin"), out, opts, log=lambda _: None)
+    results = runner.evaluate(runner.suite_scenarios("builtin"), out, opts, log=lambda _: None)
     wall = time.perf_counter() - t0
-    return wall, json.loads((out / "summary.json").read_text())
+    summary = json.loads((out / "summary.json").read_text())
+    summary["per_scenario_decisions"] = [r["vlm"]["decisions"] for r in results]
+    summary["sumo_scenarios"] = sum(runner.uses_sumo(Path(r["scenario"]), opts.config) for r in results)
+    return wall, summary
+
+
+def longest_first_makespan(lengths: list[int], slots: int) -> int:
+    """Decisions on the busiest of `slots` lanes when scenarios start longest first."""
+    lanes = [0] * slots
+    for n in sorted(lengths, reverse=True):
+        heapq.heappush(lanes, heapq.heappop(lanes) + n)
+    return max(lanes)
 
 
 def main() -> int:
@@ -78,6 +95,7 @@ def main() -> int:
     ap.add_argument("--skip-serial", action="store_true", help="only the overhead and the --jobs run")
     args = ap.parse_args()
 
+    print(f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at the start")
     o = overhead_per_decision()
     total = o["step_ms"] + o["build_ms"]
     print(f"overhead per decision over {o['decisions']} decisions:")
@@ -101,7 +119,8 @@ def main() -> int:
         with tempfile.TemporaryDirectory() as tmp:
             fast, s_fast = run_suite(url, args.jobs, args.seeds, Path(tmp) / "parallel")
             n = s_fast["scenarios"]
-            print(f"\nsuite × {args.seeds} seeds = {n} scenarios, {s_fast['decisions']} decisions, "
+            print(f"\nsuite × {args.seeds} seeds = {n} scenarios ({s_fast['sumo_scenarios']} with SUMO "
+                  f"traffic), {s_fast['decisions']} decisions, "
                   f"{args.latency_ms:.0f} ms per request:")  # fmt: skip
             print(f"  --jobs {args.jobs:<3}  {fast:8.1f} s   R4 {s_fast['r4_score']:.3f}")
             if not args.skip_serial:
@@ -114,6 +133,11 @@ def main() -> int:
                     f"({100 * per / args.latency_ms:.1f} %; includes HTTP, the SDK, the server's own "
                     "parsing and the run's files)"
                 )
+                lengths = s_slow["per_scenario_decisions"]
+                bound = sum(lengths) / longest_first_makespan(lengths, args.jobs)
+                print(f"  bound from the scenarios' lengths: {bound:.1f} × (no CPU cost at all)")
+                load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
+                print(f"  load average (1, 5, 15 min) at the end: {load}")
                 same = np.isclose(s_fast["r4_score"], s_slow["r4_score"])
                 print(f"  same summary with 1 and {args.jobs} jobs: {bool(same)}")
     finally:

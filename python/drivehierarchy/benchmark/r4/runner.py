@@ -25,10 +25,14 @@ A scenario counts as done once its line is in results.jsonl (written last), so a
 point resumes without redoing or losing finished scenarios; an unfinished scenario's directory is
 wiped and the scenario redone from scratch.
 
-Up to `jobs` scenarios are in flight at once in one process (asyncio): a VLM agent's requests from
-all of them reach the server together so it can batch them, while each scenario's world stays
-frozen during its own request, as in the original. Env steps and message building run in a thread
-pool (the Rust step releases the GIL). `ray_address` runs each scenario as a Ray task instead.
+Up to `jobs` scenarios are in flight at once (asyncio): a VLM agent's requests from all of them
+go out from this process's one connection pool and reach the server together so it can batch
+them, while each scenario's world stays frozen during its own request, as in the original. Env
+steps and message building run in a thread pool (the Rust step releases the GIL); with several
+jobs, scenarios with SUMO traffic run their env in a worker process each (`workers.py`: libsumo
+runs one simulation per process). A worker that dies fails its scenario with `WorkerDied` (the
+others go on; the run then fails naming it and a rerun redoes it). `ray_address` runs each
+scenario as a Ray task instead.
 
 Batch-abort rule (the original's: "scenarios that produce control traces without valid VLM
 inference cause the batch to terminate immediately"): a VLM scenario that ends without a single
@@ -41,6 +45,7 @@ fails with `BatchAborted`; the same command resumes it, redoing the aborted scen
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import dataclasses
 import functools
 import hashlib
@@ -60,9 +65,10 @@ from typing import Any
 import numpy as np
 
 from drivehierarchy import __version__, _core
-from drivehierarchy._core import ConfigError, DriveHierarchyError
+from drivehierarchy._core import ConfigError, DriveHierarchyError, SimulationError
 from drivehierarchy.agents.base import Agent, ConstantAgent
 from drivehierarchy.agents.expert import ExpertAgent
+from drivehierarchy.benchmark.r4.workers import WorkerDied, WorkerPool
 from drivehierarchy.envs.config import CameraConfig, R4Config
 from drivehierarchy.scenarios import builtin_scenarios
 
@@ -411,18 +417,78 @@ class _VlmStats:
         }
 
 
+class VlmScene:
+    """One VLM scenario's env, driven decision by decision: in the harness's thread pool, or in a
+    worker process (`workers.py`) for scenarios with SUMO traffic. The observation stays here;
+    only the built message, the step's info and the final record travel."""
+
+    def __init__(
+        self, scenario: Path, config: R4Config, scene_dir: Path, payload: Any, frames: bool, video: bool
+    ) -> None:
+        from drivehierarchy.envs.r4 import DriveHierarchyR4Env
+
+        self.env = DriveHierarchyR4Env(scenario=scenario, config=config)
+        self.scene_dir = scene_dir
+        self.payload = payload
+        self.frames = frames
+        self.gif = _core.GifWriter(str(scene_dir / "episode.gif"), fps=4) if video else None
+        self.obs: dict[str, Any] = {}
+
+    def reset(self, seed: int) -> dict[str, Any]:
+        self.obs, info = self.env.reset(seed=seed)
+        return dict(info)
+
+    def messages(self, decision: int, seed: int) -> list[dict[str, Any]]:
+        from drivehierarchy.agents.vlm.payload import build_messages
+
+        return build_messages(self.obs, decision, self.payload, seed=seed)
+
+    def step(self, raw: str | None, decision: int) -> tuple[bool, bool, dict[str, Any]]:
+        self.obs, _reward, terminated, truncated, info = self.env.step(raw)
+        self._record(decision)
+        return terminated, truncated, dict(info)
+
+    def step_latency_aware(
+        self, raw: str | None, held: int, interval: int, decision: int
+    ) -> tuple[bool, bool, dict[str, Any], dict[str, Any]]:
+        self.obs, terminated, truncated, info, rep = _step_latency_aware(self.env, raw, held, interval)
+        self._record(decision)
+        return terminated, truncated, dict(info), rep
+
+    def _record(self, decision: int) -> None:
+        if self.frames:
+            _save_frames(self.scene_dir / "frames", decision, self.obs)
+        if self.gif is not None:
+            self.gif.push(self.env.sim.render_camera(VIDEO_CAMERA_JSON))
+
+    def finish(
+        self, job: Job, opts: RunOptions, steps: int, wall: float, extra: dict[str, Any]
+    ) -> dict[str, Any]:
+        self._close_gif()
+        return _finish_scene(self.env, job, opts, self.scene_dir, steps, wall, extra)
+
+    def _close_gif(self) -> None:
+        if self.gif is not None:
+            self.gif.close()
+            self.gif = None
+
+    def close(self) -> None:
+        self._close_gif()
+        self.env.close()
+
+
 async def drive_vlm_scene(
-    job: Job, opts: RunOptions, out: Path, driver: Any, pool: ThreadPoolExecutor
+    job: Job,
+    opts: RunOptions,
+    out: Path,
+    driver: Any,
+    pool: ThreadPoolExecutor,
+    worker: Any = None,
 ) -> dict[str, Any]:
     """Drives one scenario with the VLM driver; returns its results line, or an `aborted` line
-    (with `"aborted": reason`) under the batch-abort rule."""
-    from drivehierarchy.envs.r4 import DriveHierarchyR4Env
-
+    (with `"aborted": reason`) under the batch-abort rule. The env runs in `pool` or, given a
+    `workers.SceneWorker`, in that worker process; the requests are sent from here either way."""
     loop = asyncio.get_running_loop()
-
-    def call(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
-        return loop.run_in_executor(pool, functools.partial(fn, *args, **kwargs))
-
     vopts = driver.options
     config = opts.config
     images = driver.payload.images
@@ -438,30 +504,42 @@ async def drive_vlm_scene(
         # decision cadence.
         config = config.replace(decision_interval_ticks=1)
     scene_dir = _fresh_scene_dir(out, job, opts.frames)
-    env = await call(DriveHierarchyR4Env, scenario=job.scenario, config=config)
-    gif = _core.GifWriter(str(scene_dir / "episode.gif"), fps=4) if opts.video else None
+    args = (job.scenario, config, scene_dir, driver.payload, opts.frames, opts.video)
+    scene: VlmScene | None = None
+    if worker is not None:
+        from drivehierarchy.benchmark.r4.workers import make_remote
+
+        await worker.call(pool, "new", VlmScene, *args)
+        remote = make_remote(worker, pool)
+    else:
+        scene = await loop.run_in_executor(pool, functools.partial(VlmScene, *args))
+
+        async def remote(method: str, *a: Any) -> Any:
+            return await loop.run_in_executor(pool, functools.partial(getattr(scene, method), *a))
+
     stats = _VlmStats()
     aborted: str | None = None
     t0 = time.perf_counter()
+    closed = False
     try:
-        obs, info = await call(env.reset, seed=job.seed)
+        info = await remote("reset", job.seed)
         with (scene_dir / "decisions.jsonl").open("w", encoding="utf-8") as dlog:
             while True:
                 stats.decisions += 1
                 n = stats.decisions
                 asked_tick = info.get("tick")
-                messages = await call(driver.messages, obs, n, job.seed)
+                messages = await remote("messages", n, job.seed)
                 reply = await driver.request(messages)
                 stats.latency_s += reply.latency_s
                 held = 0
                 if vopts.latency_aware:
                     held = round(reply.latency_s / TICK_S)
                     stats.held_ticks += held
-                    obs, terminated, truncated, info, rep = await call(
-                        _step_latency_aware, env, reply.raw, held, interval
+                    terminated, truncated, info, rep = await remote(
+                        "step_latency_aware", reply.raw, held, interval, n
                     )
                 else:
-                    obs, _reward, terminated, truncated, info = await call(env.step, reply.raw)
+                    terminated, truncated, info = await remote("step", reply.raw, n)
                     rep = info.get("reply") or {}
                 applied = bool(rep)  # False: the episode ended while the reply was still "in flight"
                 failure = rep.get("failure")
@@ -488,49 +566,47 @@ async def drive_vlm_scene(
                 }
                 dlog.write(json.dumps(entry, sort_keys=True) + "\n")
                 dlog.flush()
-                if opts.frames:
-                    await call(_save_frames, scene_dir / "frames", n, obs)
-                if gif is not None:
-                    gif.push(await call(env.unwrapped.sim.render_camera, VIDEO_CAMERA_JSON))
                 if stats.consecutive_transport >= vopts.max_consecutive_transport_failures:
                     aborted = "server_unavailable"
                     break
                 if terminated or truncated:
                     break
-    finally:
-        if gif is not None:
-            gif.close()
-    if aborted is None and stats.valid == 0:
-        aborted = "no_valid_decision"
-    wall = time.perf_counter() - t0
-    if aborted is not None:
-        line = {
-            "key": job.key,
-            "scenario": str(job.scenario),
-            "category": job.category,
-            "seed": job.seed,
-            "aborted": aborted,
-            "last_error": reply.error_detail,
-            "wall_s": round(wall, 4),
-            "vlm": stats.line(),
-        }
-        _write_json_atomic(scene_dir / "aborted.json", line)
-        env.close()
+        if aborted is None and stats.valid == 0:
+            aborted = "no_valid_decision"
+        wall = time.perf_counter() - t0
+        if aborted is not None:
+            line = {
+                "key": job.key,
+                "scenario": str(job.scenario),
+                "category": job.category,
+                "seed": job.seed,
+                "aborted": aborted,
+                "last_error": reply.error_detail,
+                "wall_s": round(wall, 4),
+                "vlm": stats.line(),
+            }
+            _write_json_atomic(scene_dir / "aborted.json", line)
+            return line
+        extra: dict[str, Any] = {"vlm": stats.line()}
+        if vopts.latency_aware:
+            extra["vlm"]["held_ticks"] = stats.held_ticks
+        line = await remote("finish", job, opts, stats.decisions, wall, extra)
+        if vopts.latency_aware:
+            # The env counted every held tick as a decision without a reply; the record keeps the
+            # real decisions and failures (the episode log's end line keeps the env's counts).
+            record = line["score"]
+            record["decisions"] = stats.decisions
+            record["parse_failures"] = stats.parse_failures + stats.transport_errors
+            record["latency_aware"] = {"held_ticks": stats.held_ticks, "decision_interval_ticks": interval}
+            _write_json_atomic(scene_dir / "scene_score.json", record)
+        await remote("close")
+        closed = True
         return line
-    extra: dict[str, Any] = {"vlm": stats.line()}
-    if vopts.latency_aware:
-        extra["vlm"]["held_ticks"] = stats.held_ticks
-    line = await call(_finish_scene, env, job, opts, scene_dir, stats.decisions, wall, extra)
-    if vopts.latency_aware:
-        # The env counted every held tick as a decision without a reply; the record keeps the
-        # real decisions and failures (the episode log's end line keeps the env's counts).
-        record = line["score"]
-        record["decisions"] = stats.decisions
-        record["parse_failures"] = stats.parse_failures + stats.transport_errors
-        record["latency_aware"] = {"held_ticks": stats.held_ticks, "decision_interval_ticks": interval}
-        _write_json_atomic(scene_dir / "scene_score.json", record)
-    env.close()
-    return line
+    finally:
+        if not closed:
+            # Aborted, or failed: the env (and its SUMO) goes now, whatever state it is in.
+            with contextlib.suppress(Exception):
+                await remote("close")
 
 
 TICK_S = 0.05  # the protocol's simulation step
@@ -597,6 +673,7 @@ class _Progress:
         self.parse = sum(int((r.get("vlm") or {}).get("parse_failures", 0)) for r in done.values())
         self.transport = sum(int((r.get("vlm") or {}).get("transport_errors", 0)) for r in done.values())
         self.aborted = 0
+        self.failed = 0
         if enabled:
             from tqdm import tqdm
 
@@ -608,8 +685,13 @@ class _Progress:
     def _postfix(self) -> None:
         if self.bar is not None:
             mean = float(np.mean(self.scores)) if self.scores else float("nan")
+            extra = {"failed": self.failed} if self.failed else {}
             self.bar.set_postfix(
-                mean_S_R4=f"{mean:.2f}", parse_fail=self.parse, transport=self.transport, aborted=self.aborted
+                mean_S_R4=f"{mean:.2f}",
+                parse_fail=self.parse,
+                transport=self.transport,
+                aborted=self.aborted,
+                **extra,
             )
 
     def update(self, line: dict[str, Any]) -> None:
@@ -620,6 +702,13 @@ class _Progress:
             self.aborted += 1
         else:
             self.scores.append(float(line["score"]["score_composed"]))
+        if self.bar is not None:
+            self.bar.update(1)
+            self._postfix()
+
+    def fail(self) -> None:
+        """A scenario that failed with an error (its worker died); redone on resume."""
+        self.failed += 1
         if self.bar is not None:
             self.bar.update(1)
             self._postfix()
@@ -663,6 +752,11 @@ async def evaluate_async(
             log(f"[{index[job.key]}/{len(jobs)}] {job.key}: done before, skipped")
         else:
             todo.append(job)
+    if opts.jobs > 1:
+        # Longest first (by the scenario's reference duration): the suite's end is not held up by
+        # long scenarios started last. Results do not depend on the order.
+        length = {p: expected_duration_s(p) for p in {j.scenario for j in todo}}
+        todo.sort(key=lambda j: -length[j.scenario])
     progress = _Progress(len(jobs), len(jobs) - len(todo), opts.progress, done)
     sem = asyncio.Semaphore(opts.jobs)
     aborted: list[dict[str, Any]] = []
@@ -671,20 +765,37 @@ async def evaluate_async(
     pool = ThreadPoolExecutor(max_workers=max(2, opts.jobs), thread_name_prefix="r4")
     loop = asyncio.get_running_loop()
 
-    sumo_lock = asyncio.Lock()
+    # libsumo runs one simulation per process: with several jobs, scenarios with SUMO traffic run
+    # in worker processes (one libsumo each; Ray tasks have their own processes anyway).
+    workers = WorkerPool() if remote is None and opts.jobs > 1 else None
+    failed: list[tuple[Job, BaseException]] = []
 
     async def one(job: Job) -> None:
-        # libsumo runs one simulation per process: scenarios with SUMO traffic take turns here
-        # (Ray tasks run in their own worker processes).
-        lock = sumo_lock if remote is None and uses_sumo(job.scenario, opts.config) else _NoLock()
-        async with lock, sem:
-            await run_one(job)
+        async with sem:
+            if aborted:
+                return  # the batch is stopping: start nothing new
+            try:
+                await run_one(job)
+            except WorkerDied as exc:
+                # That scenario is lost (redone from scratch on resume); the others go on.
+                failed.append((job, exc))
+                scene_dir = out / "scenes" / job.key
+                scene_dir.mkdir(parents=True, exist_ok=True)
+                _write_json_atomic(scene_dir / "error.json", {"key": job.key, "error": str(exc)})
+                log(f"[{index[job.key]}/{len(jobs)}] {job.key}: FAILED ({exc})")
+                progress.fail()
 
     async def run_one(job: Job) -> None:
-        if aborted:
-            return  # the batch is stopping: start nothing new
+        in_worker = workers is not None and uses_sumo(job.scenario, opts.config)
         if remote is not None:
             line = await remote.remote(job, opts, out)
+        elif in_worker:
+            assert workers is not None
+            async with workers.worker(job.key) as w:
+                if driver is not None:
+                    line = await drive_vlm_scene(job, opts, out, driver, pool, worker=w)
+                else:
+                    line = await w.call(pool, "run", run_scene, job, opts, out)
         elif driver is not None:
             line = await drive_vlm_scene(job, opts, out, driver, pool)
         else:
@@ -704,10 +815,15 @@ async def evaluate_async(
             )
         progress.update(line)
 
+    clean = False
     try:
         await asyncio.gather(*(one(j) for j in todo))
+        clean = True
     finally:
         progress.close()
+        if workers is not None:
+            # Torn down by an error: kill the workers so no thread waits on one.
+            workers.close(kill=not clean)
         pool.shutdown(wait=True)
         if driver is not None:
             await driver.transport.aclose()
@@ -720,17 +836,18 @@ async def evaluate_async(
             f"last error: {first.get('last_error')}). Batch aborted as the original does: "
             f"{len(done)}/{len(jobs)} scenarios finished; run the same command again to resume."
         )
+    if failed:
+        job, exc = failed[0]
+        more = ", ".join(j.key for j, _ in failed[1:])
+        raise SimulationError(
+            f"scenario {job.key}: {exc}"
+            + (f" (and {len(failed) - 1} more: {more})" if more else "")
+            + f". {len(done)}/{len(jobs)} scenarios finished; run the same command again to resume "
+            "(failed scenarios are redone from scratch)."
+        ) from exc
     results = [done[j.key] for j in jobs]
     write_summary(out, results, model=_model_name(opts))
     return results
-
-
-class _NoLock:
-    async def __aenter__(self) -> None:
-        return None
-
-    async def __aexit__(self, *exc: object) -> None:
-        return None
 
 
 _SUMO_MODE = re.compile(r'^\s*\[traffic\][^\[]*?^\s*mode\s*=\s*"sumo"', re.MULTILINE | re.DOTALL)
@@ -742,6 +859,18 @@ def uses_sumo(scenario: Path, config: R4Config) -> bool:
     if mode is not None:
         return bool(mode == "sumo")
     return bool(_SUMO_MODE.search(scenario.read_text(encoding="utf-8")))
+
+
+_REFERENCE_DURATION = re.compile(r"^\s*reference_duration_s\s*=\s*([0-9.eE+-]+)", re.MULTILINE)
+
+
+def expected_duration_s(scenario: Path) -> float:
+    """The scenario's `reference_duration_s` (0 when it has none): a proxy for its length."""
+    m = _REFERENCE_DURATION.search(scenario.read_text(encoding="utf-8"))
+    try:
+        return float(m.group(1)) if m else 0.0
+    except ValueError:
+        return 0.0
 
 
 def evaluate(
