@@ -213,7 +213,7 @@ def row(label: str, r: Rate, target: float | None = None, peer: Rate | None = No
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=2.0, help="time per measurement")
-    ap.add_argument("--scenario", default="04_intersection/town01_straight_cross_traffic")
+    ap.add_argument("--scenario", default="04_intersection/town01_04_straight_cross_traffic")
     ap.add_argument("--decisions", type=int, default=24, help="expert decisions before measuring")
     ap.add_argument("--no-highway", action="store_true")
     ap.add_argument("--no-pin", action="store_true", help="do not pin the process to one core")

@@ -35,7 +35,7 @@ def overhead_per_decision(decisions: int = 200) -> dict[str, float]:
     from drivehierarchy.envs.r4 import DriveHierarchyR4Env
     from drivehierarchy.testing.openai_server import parse_chat_request, route_driver
 
-    env = DriveHierarchyR4Env(scenario="03_turning/town01_right_turn_signalised")
+    env = DriveHierarchyR4Env(scenario="03_turning/town01_03_right_turn_signalised")
     obs, _ = env.reset(seed=0)
     step_s, build_s, n = 0.0, 0.0, 0
     while n < decisions:

@@ -178,7 +178,7 @@ fn expert_scores_at_least_90_on_every_project_scenario() {
 /// trip the blocked timeout, for a minute.
 #[test]
 fn forced_red_at_the_signalised_crossing_holds_the_ego() {
-    let f = repo_root().join("scenarios/r4/03_turning/town01_right_turn_signalised.toml");
+    let f = repo_root().join("scenarios/r4/03_turning/town01_03_right_turn_signalised.toml");
     if !f.exists() {
         eprintln!("skipping: {} not found", f.display());
         return;

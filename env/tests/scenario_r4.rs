@@ -305,7 +305,10 @@ fn blind_driver_crashes_in_hazard_scenarios() {
             continue;
         }
         let o = drive(&s, false, false);
-        eprintln!("{:40} blind: {} at t = {:.1} s", s.id, o.reason, o.time_s);
-        assert!(o.reason.starts_with("contact"), "{}: {o:?}", s.id);
+        eprintln!(
+            "{:40} blind: {} at t = {:.1} s after {:.1} m, S_R4 {:.1}",
+            s.id, o.reason, o.time_s, o.travel_m, o.s_r4
+        );
+        assert!(o.reason.starts_with("contact") && !o.reached, "{}: {o:?}", s.id);
     }
 }

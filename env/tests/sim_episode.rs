@@ -21,7 +21,7 @@ fn sim(rel: &str, config: SimConfig) -> Sim {
 
 /// Drives a fixed, seeded action sequence; returns (trajectory hash, rewards, state bits).
 fn drive(config: SimConfig) -> (String, Vec<f64>, Vec<u32>) {
-    let mut s = sim("01_pedestrian/town01_midblock_crossing.toml", config);
+    let mut s = sim("01_pedestrian/town01_01_midblock_crossing.toml", config);
     let (obs, _) = s.reset(42).unwrap();
     let mut state_bits: Vec<u32> = obs.state.iter().map(|v| v.to_bits()).collect();
     let mut rewards = Vec::new();
@@ -54,7 +54,7 @@ fn same_seed_and_actions_give_identical_episodes() {
 
 #[test]
 fn observation_has_state_prompt_and_images_as_configured() {
-    let mut s = sim("03_turning/town01_right_turn_signalised.toml", SimConfig::default());
+    let mut s = sim("03_turning/town01_03_right_turn_signalised.toml", SimConfig::default());
     let (obs, info) = s.reset(0).unwrap();
     assert_eq!(obs.state.len(), STATE_FIELDS.len());
     let front = obs.front.expect("front image");
@@ -66,7 +66,7 @@ fn observation_has_state_prompt_and_images_as_configured() {
     assert_eq!(info.tick, 4);
     assert_eq!(info.decision, 0);
     let mut s =
-        sim("03_turning/town01_right_turn_signalised.toml", SimConfig { warmup_ticks: 0, ..no_images() });
+        sim("03_turning/town01_03_right_turn_signalised.toml", SimConfig { warmup_ticks: 0, ..no_images() });
     assert_eq!(s.reset(0).unwrap().1.tick, 0);
     let out = s.step(Action::Decision(Decision { steer: 0.0, target_speed_mps: 5.0 })).unwrap();
     assert_eq!((out.info.tick, out.info.decision), (5, 1));
@@ -74,7 +74,7 @@ fn observation_has_state_prompt_and_images_as_configured() {
 
 #[test]
 fn misuse_is_a_named_error_not_a_panic() {
-    let mut s = sim("03_turning/town01_right_turn_signalised.toml", no_images());
+    let mut s = sim("03_turning/town01_03_right_turn_signalised.toml", no_images());
     let act = Action::Decision(Decision { steer: 0.0, target_speed_mps: 1.0 });
     assert!(matches!(s.step(act), Err(Error::Simulation(m)) if m.contains("reset")));
     s.reset(0).unwrap();
@@ -84,7 +84,7 @@ fn misuse_is_a_named_error_not_a_panic() {
     assert!(matches!(s.step(raw), Err(Error::Config { .. })));
     let bad = SimConfig { decision_interval_ticks: 0, ..no_images() };
     assert!(Sim::new(
-        &scenario("03_turning/town01_right_turn_signalised.toml"),
+        &scenario("03_turning/town01_03_right_turn_signalised.toml"),
         bad,
         &LoadOptions::default()
     )
@@ -98,7 +98,7 @@ fn misuse_is_a_named_error_not_a_panic() {
 #[test]
 fn raw_mode_applies_pedals_directly_and_rewards_sum_to_the_score() {
     let config = SimConfig { action_mode: ActionMode::Raw, ..no_images() };
-    let mut s = sim("07_sudden_brake/town01_lead_brakes.toml", config);
+    let mut s = sim("07_sudden_brake/town01_07_lead_brakes.toml", config);
     s.reset(0).unwrap();
     let mut total = 0.0;
     let mut terminated = false;
@@ -120,7 +120,7 @@ fn raw_mode_applies_pedals_directly_and_rewards_sum_to_the_score() {
 
 #[test]
 fn the_run_log_rescores_to_the_live_record() {
-    let mut s = sim("01_pedestrian/town01_midblock_crossing.toml", no_images());
+    let mut s = sim("01_pedestrian/town01_01_midblock_crossing.toml", no_images());
     s.reset(3).unwrap();
     for _ in 0..40 {
         let out = s.step(Action::Decision(Decision { steer: 0.0, target_speed_mps: 6.0 })).unwrap();
@@ -143,7 +143,7 @@ fn a_failed_reply_holds_the_previous_control_verbatim() {
         raw: Some(raw.into()),
         parsed: Ok(Decision { steer, target_speed_mps: target }),
     };
-    let scenario = "07_sudden_brake/town01_lead_brakes.toml";
+    let scenario = "07_sudden_brake/town01_07_lead_brakes.toml";
     let mut s = sim(scenario, no_images());
     s.reset(0).unwrap();
     let first = s.step(ok("steer: 0.3\ntarget_speed_mps: 6", 0.3, 6.0)).unwrap();
@@ -182,13 +182,13 @@ fn a_failed_reply_holds_the_previous_control_verbatim() {
 #[test]
 fn scenario_duration_sets_the_timeout_and_defaults_to_the_longest_actor() {
     // Default: the longest estimated duration over the actors, at least T_ref.
-    let s = sim("07_sudden_brake/town01_lead_brakes.toml", no_images());
+    let s = sim("07_sudden_brake/town01_07_lead_brakes.toml", no_images());
     let sc = s.scenario();
     assert_eq!(sc.duration_given_s, None);
     assert!(sc.scenario_duration_s() >= sc.reference_duration_s());
 
     // Given: `duration_s` is the scenario duration; T_ref stays the efficiency reference.
-    let text = std::fs::read_to_string(scenario("07_sudden_brake/town01_lead_brakes.toml")).unwrap();
+    let text = std::fs::read_to_string(scenario("07_sudden_brake/town01_07_lead_brakes.toml")).unwrap();
     let map = scenario("../maps/town01/town01.net.xml").canonicalize().unwrap();
     let text = text
         .replace("map = \"../../maps/town01/town01.net.xml\"", &format!("map = {:?}\nduration_s = 12.5", map))

@@ -136,7 +136,7 @@ fn bench_demand_resolves_with_seeded_connected_random_trips() {
 
 #[test]
 fn scenarios_without_a_traffic_table_have_no_demand() {
-    let s = Scenario::load(scenarios().join("r4/07_sudden_brake/town01_lead_brakes.toml")).unwrap();
+    let s = Scenario::load(scenarios().join("r4/07_sudden_brake/town01_07_lead_brakes.toml")).unwrap();
     assert_eq!(s.traffic.mode, TrafficMode::None);
     assert!(s.traffic.is_empty());
 }

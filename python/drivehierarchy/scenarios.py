@@ -9,7 +9,7 @@ from pathlib import Path
 
 from drivehierarchy._core import ScenarioError
 
-DEFAULT_SCENARIO = "03_turning/town01_right_turn_signalised"
+DEFAULT_SCENARIO = "03_turning/town01_03_right_turn_signalised"
 
 
 def builtin_root() -> Path:

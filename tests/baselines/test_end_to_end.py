@@ -28,8 +28,8 @@ from drivehierarchy.scenarios import builtin_root
 
 # Score-record fields measuring wall-clock time (names before/after protocol v2).
 WALL_CLOCK_KEYS = ("wall_duration", "duration_system")
-INTERSECTION = builtin_root() / "r4" / "04_intersection" / "town01_straight_cross_traffic.toml"
-T_JUNCTION = builtin_root() / "r4" / "05_t_intersection" / "town01_left_turn_t.toml"
+INTERSECTION = builtin_root() / "r4" / "04_intersection" / "town01_04_straight_cross_traffic.toml"
+T_JUNCTION = builtin_root() / "r4" / "05_t_intersection" / "town01_05_left_turn_t.toml"
 
 
 def cli(*args: str) -> None:

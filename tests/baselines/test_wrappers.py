@@ -26,8 +26,8 @@ from drivehierarchy.envs.config import R4Config
 from drivehierarchy.envs.r4 import STATE_FIELDS, DriveHierarchyR4Env
 from drivehierarchy.scenarios import builtin_root, builtin_scenarios
 
-PED = builtin_root() / "r4" / "01_pedestrian" / "town01_midblock_crossing.toml"
-BRAKE = builtin_root() / "r4" / "07_sudden_brake" / "town01_lead_brakes.toml"
+PED = builtin_root() / "r4" / "01_pedestrian" / "town01_01_midblock_crossing.toml"
+BRAKE = builtin_root() / "r4" / "07_sudden_brake" / "town01_07_lead_brakes.toml"
 # Score-record fields measuring wall-clock time (names before/after protocol v2).
 WALL_CLOCK_KEYS = ("wall_duration", "duration_system")
 STATE_ONLY = R4Config(front=None, bev=None, prompt=False)
@@ -113,7 +113,7 @@ def test_split_is_by_file_stable_and_validated() -> None:
     train, held = split_suite(suite, 0.3)
     assert len(held) == 3 and len(train) == 7 and not set(train) & set(held)
     assert split_suite(list(reversed(suite)), 0.3)[1] == sorted(held, key=list(reversed(suite)).index)
-    train2, held2 = split_suite(suite, ["01_pedestrian/town01_midblock_crossing"])
+    train2, held2 = split_suite(suite, ["01_pedestrian/town01_01_midblock_crossing"])
     assert [p.parent.name for p in held2] == ["01_pedestrian"] and len(train2) == 9
     with pytest.raises(ConfigError, match="99_none/x"):
         split_suite(suite, ["99_none/x"])

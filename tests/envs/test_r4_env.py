@@ -17,7 +17,7 @@ from drivehierarchy.agents.expert import ExpertAgent
 from drivehierarchy.envs.r4 import STATE_FIELDS, DriveHierarchyR4Env
 from drivehierarchy.scenarios import builtin_root, builtin_scenarios, scenario_id
 
-SCENARIO = "03_turning/town01_right_turn_signalised"
+SCENARIO = "03_turning/town01_03_right_turn_signalised"
 TOWN01 = builtin_root() / "maps" / "town01" / "town01.net.xml"
 NO_IMAGES = {"front": None, "bev": None}
 
@@ -135,7 +135,7 @@ def test_steering_off_the_road_ends_on_the_31st_off_road_tick() -> None:
 
 
 def test_raw_replies_are_parsed_in_rust_and_a_failure_holds_the_control() -> None:
-    env = make("07_sudden_brake/town01_lead_brakes", **NO_IMAGES)
+    env = make("07_sudden_brake/town01_07_lead_brakes", **NO_IMAGES)
     env.reset(seed=0)
     _, _, _, _, first = env.step("steer: 0.3\ntarget_speed_mps: 6.0")
     held = first["control"]
@@ -165,7 +165,7 @@ def test_raw_replies_are_parsed_in_rust_and_a_failure_holds_the_control() -> Non
 
 def run_fixed(seed: int, images: bool) -> tuple[str, list[bytes], list[float]]:
     cfg = {} if images else NO_IMAGES
-    env = make("01_pedestrian/town01_midblock_crossing", **cfg)
+    env = make("01_pedestrian/town01_01_midblock_crossing", **cfg)
     obs, _ = env.reset(seed=seed)
     rng = np.random.default_rng(7)
     frames, rewards = [], []
@@ -190,7 +190,7 @@ def test_same_seed_and_actions_give_identical_trajectories_and_frames() -> None:
 
 
 def test_rescore_from_the_log_reproduces_the_live_score() -> None:
-    env = make("07_sudden_brake/town01_lead_brakes", **NO_IMAGES)
+    env = make("07_sudden_brake/town01_07_lead_brakes", **NO_IMAGES)
     live = run_episode(env, ExpertAgent(), seed=1).score
     again = json.loads(_core.rescore(env.sim.episode_log()))
     for key in ("score_route", "score_safety", "score_efficiency", "score_composed", "termination_reason"):
@@ -295,7 +295,7 @@ def test_unknown_settings_and_options_are_rejected() -> None:
 def test_reset_can_switch_scenarios() -> None:
     env = make(**NO_IMAGES)
     _, a = env.reset(seed=0)
-    _, b = env.reset(seed=0, options={"scenario": "07_sudden_brake/town01_lead_brakes"})
+    _, b = env.reset(seed=0, options={"scenario": "07_sudden_brake/town01_07_lead_brakes"})
     assert a["route_length_m"] != b["route_length_m"]
     assert env.sim.category == "07_sudden_brake"
 

@@ -170,13 +170,13 @@ class Weave:
 
 
 CASES = [
-    ("07_sudden_brake/town01_lead_brakes", ExpertAgent),
+    ("07_sudden_brake/town01_07_lead_brakes", ExpertAgent),
     ("10_roundabout/town01_10_roundabout_exit_south", ExpertAgent),
-    ("03_turning/town01_right_turn_signalised", lambda: ConstantAgent([0.0, 0.0])),
-    ("03_turning/town01_right_turn_signalised", lambda: ConstantAgent([0.3, 8.0])),
-    ("01_pedestrian/town01_midblock_crossing", lambda: ConstantAgent([0.0, 9.0])),
-    ("02_obstacles/town01_cones_right_lane", Weave),
-    ("04_intersection/town01_straight_cross_traffic", lambda: ConstantAgent([0.0, 2.5])),
+    ("03_turning/town01_03_right_turn_signalised", lambda: ConstantAgent([0.0, 0.0])),
+    ("03_turning/town01_03_right_turn_signalised", lambda: ConstantAgent([0.3, 8.0])),
+    ("01_pedestrian/town01_01_midblock_crossing", lambda: ConstantAgent([0.0, 9.0])),
+    ("02_obstacles/town01_02_cones_right_lane", Weave),
+    ("04_intersection/town01_04_straight_cross_traffic", lambda: ConstantAgent([0.0, 2.5])),
 ]
 
 

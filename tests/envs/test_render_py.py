@@ -19,8 +19,8 @@ from drivehierarchy.envs.config import BevConfig, CameraConfig, R4Config
 from drivehierarchy.envs.r4 import STATE_FIELDS, DriveHierarchyR4Env
 from drivehierarchy.scenarios import builtin_root, resolve_scenario
 
-SIGNALISED = "03_turning/town01_right_turn_signalised"
-LEAD_BRAKES = "07_sudden_brake/town01_lead_brakes"
+SIGNALISED = "03_turning/town01_03_right_turn_signalised"
+LEAD_BRAKES = "07_sudden_brake/town01_07_lead_brakes"
 TOWN01 = builtin_root() / "maps" / "town01" / "town01.net.xml"
 
 

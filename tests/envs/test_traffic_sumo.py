@@ -340,7 +340,7 @@ def test_backends_agree_with_mirrored_scenario_actors(tmp_path: Path) -> None:
     # The built-in crossing scenario's cars, bus and parked cars are placed in SUMO (mirrors; two
     # cars leave the world at the end of their paths, and so do their SUMO doubles) beside SUMO
     # flows on the same roads. Both backends must give the same traffic, tick for tick.
-    src = builtin_root() / "r4" / "04_intersection" / "town01_straight_cross_traffic.toml"
+    src = builtin_root() / "r4" / "04_intersection" / "town01_04_straight_cross_traffic.toml"
     body = src.read_text(encoding="utf-8")
     body = body[body.index("[ego]") :] + (
         '\n[traffic]\nwarmup_s = 10.0\n[[traffic.flows]]\nfrom = "T2C"\nto = "C2W"\nvehs_per_hour = 600\n'

@@ -12,7 +12,7 @@ from PIL import Image
 from drivehierarchy.cli import main
 from drivehierarchy.scenarios import builtin_root, builtin_scenarios, scenario_id
 
-SCEN = "07_sudden_brake/town01_lead_brakes"
+SCEN = "07_sudden_brake/town01_07_lead_brakes"
 
 
 def test_list_builtin_and_folder(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

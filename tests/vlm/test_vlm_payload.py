@@ -20,7 +20,7 @@ from drivehierarchy.agents.vlm.payload import (
 )
 from drivehierarchy.envs.r4 import DriveHierarchyR4Env
 
-SCENARIO = "01_pedestrian/town01_midblock_crossing"
+SCENARIO = "01_pedestrian/town01_01_midblock_crossing"
 
 
 @pytest.fixture(scope="module")

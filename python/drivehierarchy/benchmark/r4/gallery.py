@@ -25,7 +25,7 @@ from drivehierarchy.envs.config import BevConfig, CameraConfig
 from drivehierarchy.scenarios import builtin_scenarios
 
 # Scenario whose chase view and surround sheet are added (a signalised crossing with traffic).
-FEATURED = "03_turning__town01_right_turn_signalised"
+FEATURED = "03_turning__town01_03_right_turn_signalised"
 # nuScenes layout: front row left→right, back row as seen when turned round.
 SURROUND_LAYOUT = (
     ("CAM_FRONT_LEFT", "CAM_FRONT", "CAM_FRONT_RIGHT"),
