@@ -41,6 +41,9 @@ REAL_WORLD_SUMO = {
     "tools/game/DRT/osm.net.xml",
 }
 
+# Project maps cut from a real-world network (scenarios/maps/README.md says from which).
+REAL_WORLD_PROJECT = {"bs3d_arterial"}
+
 FILES = sorted(SUITE.glob("*/*.toml"))
 
 
@@ -51,8 +54,9 @@ def _doc(path: Path) -> dict:
 def _is_real_world(path: Path, map_ref: str) -> bool:
     if map_ref.startswith("sumo:"):
         return map_ref.removeprefix("sumo:") in REAL_WORLD_SUMO
+    folder = (path.parent / map_ref).resolve().parent.name
     # A project map imported from OpenStreetMap keeps "osm" in its folder name.
-    return "osm" in (path.parent / map_ref).resolve().parent.name
+    return "osm" in folder or folder in REAL_WORLD_PROJECT
 
 
 def test_suite_shape() -> None:
