@@ -56,6 +56,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         height_m: 0.0,
                         color: [(i * 40 % 255) as u8, 90, 160],
                         braking: i % 3 == 0,
+                        blinkers: 0,
                     }
                 })
                 .collect()
@@ -73,6 +74,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 height_m: 1.5,
                 color: [200, 200, 200],
                 braking: false,
+                blinkers: 0,
             })
             .collect();
         let route: Vec<Vec<dh_env::geom::Vec2>> = poses

@@ -64,6 +64,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             height_m: 1.5,
             color: [200, 200, 200],
             braking: false,
+            blinkers: 0,
         };
         let actors: Vec<ActorView> = (0..24u32)
             .map(|i| ActorView {
@@ -79,6 +80,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 height_m: 0.0,
                 color: [(i * 40 % 255) as u8, 90, 160],
                 braking: i % 3 == 0,
+                blinkers: 0,
             })
             .collect();
         let lights = [TrafficLightView {

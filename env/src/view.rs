@@ -59,7 +59,14 @@ pub struct ActorView {
     /// sRGB body colour.
     pub color: [u8; 3],
     pub braking: bool,
+    /// Turn indicators lit: [`BLINKER_RIGHT`] | [`BLINKER_LEFT`] (both = hazard lights).
+    #[serde(default)]
+    pub blinkers: u8,
 }
+
+/// [`ActorView::blinkers`] bits.
+pub const BLINKER_RIGHT: u8 = 1;
+pub const BLINKER_LEFT: u8 = 2;
 
 impl ActorView {
     pub fn footprint(&self) -> Obb {

@@ -40,6 +40,7 @@ fn actor(id: u32, kind: ActorKind, fwd: f64, left: f64) -> ActorView {
         height_m: 0.0,
         color: [40, 90, 200],
         braking: false,
+        blinkers: 0,
     }
 }
 
@@ -54,6 +55,7 @@ fn ego() -> ActorView {
         height_m: 1.5,
         color: [200, 200, 200],
         braking: false,
+        blinkers: 0,
     }
 }
 
@@ -304,4 +306,44 @@ fn real_net_builds_fast_when_present() {
     assert!(tris > 10_000 && segs > 5_000 && props > 0, "{:?}", map.stats());
     // Debug builds are slower; the release figure is ~70 ms.
     assert!(t.elapsed().as_secs_f64() < 10.0);
+}
+
+/// Lit turn indicators (SUMO's blinker bits) show as amber lamps on the signalling side.
+#[test]
+fn lit_indicators_show_on_their_side() {
+    let (_, map) = world();
+    let e = ego();
+    let cfg = CameraConfig::front();
+    let render = |blinkers: u8| {
+        let car = ActorView { blinkers, ..actor(1, ActorKind::Car, 12.0, 0.0) };
+        let mut img = Image::default();
+        render_camera(map, &frame(&e, &[car], &[], &[]), &cfg, &mut img).unwrap();
+        img
+    };
+    let base = render(0);
+    // Amber pixels that the same car without indicators does not have, per image half.
+    let amber = |blinkers: u8| {
+        let img = render(blinkers);
+        let (mut left, mut right) = (0, 0);
+        for y in 0..img.height {
+            for x in 0..img.width {
+                let [r, g, b] = img.pixel(x, y).unwrap();
+                if img.pixel(x, y) != base.pixel(x, y) && r > 220 && (120..=210).contains(&g) && b < 80 {
+                    if x < img.width / 2 {
+                        left += 1;
+                    } else {
+                        right += 1;
+                    }
+                }
+            }
+        }
+        (left, right)
+    };
+    assert_eq!(amber(0), (0, 0));
+    let (l, r) = amber(dh_env::view::BLINKER_LEFT);
+    assert!(l > 4 && r == 0, "left indicator: {l} left / {r} right amber pixels");
+    let (l, r) = amber(dh_env::view::BLINKER_RIGHT);
+    assert!(r > 4 && l == 0, "right indicator: {l} left / {r} right amber pixels");
+    let (l, r) = amber(dh_env::view::BLINKER_LEFT | dh_env::view::BLINKER_RIGHT);
+    assert!(l > 4 && r > 4, "hazard lights: {l} / {r}");
 }

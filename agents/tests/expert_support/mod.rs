@@ -33,6 +33,7 @@ pub fn actor(
         height_m: 1.5,
         color: [200, 200, 200],
         braking: false,
+        blinkers: 0,
     }
 }
 

@@ -223,6 +223,7 @@ fn scale(c: [u8; 3], k: f32) -> [u8; 3] {
 
 const GLASS: [u8; 3] = [40, 55, 75];
 const TYRE: [u8; 3] = [22, 22, 24];
+const AMBER: [u8; 3] = [255, 165, 0];
 const SKIN: [u8; 3] = [224, 172, 135];
 const TROUSERS: [u8; 3] = [55, 75, 140];
 
@@ -235,13 +236,22 @@ fn wheels(m: &mut Mesh, fr: &Frame, hl: f32, hw: f32, r: f32, axles: &[f32]) {
     }
 }
 
-fn lights(m: &mut Mesh, fr: &Frame, hl: f32, hw: f32, z: f32, braking: bool) {
+fn lights(m: &mut Mesh, fr: &Frame, hl: f32, hw: f32, z: f32, braking: bool, blinkers: u8) {
     let brake = if braking { [255, 25, 25] } else { [120, 20, 20] };
     for side in [-1.0f32, 1.0] {
         let left = side * (hw - 0.25);
         // Rear lamps protrude 3 cm so they win the depth test against the body.
         m.out_lamp(fr, -hl - 0.03, left, z, 0.18, 0.09, brake, braking);
         m.out_lamp(fr, hl + 0.03, left, z, 0.17, 0.07, [235, 235, 210], false);
+        // Indicators at the outer corners, front and rear. A lit one is drawn steadily (not
+        // flashing) so a single frame, which is all a VLM sees per decision, shows it.
+        // Only lit ones are drawn: the body colour stands in for the unlit housing.
+        let bit = if side > 0.0 { crate::view::BLINKER_LEFT } else { crate::view::BLINKER_RIGHT };
+        if blinkers & bit != 0 {
+            let corner = side * (hw - 0.035);
+            m.out_lamp(fr, -hl - 0.03, corner, z, 0.035, 0.08, AMBER, true);
+            m.out_lamp(fr, hl + 0.03, corner, z, 0.035, 0.07, AMBER, true);
+        }
     }
 }
 
@@ -321,7 +331,7 @@ pub(crate) fn actor(out: &mut Vec<Tri3>, a: &ActorView, origin: Vec2, id: u32) {
                 [0.28 * hl, 0.42 * hl, hw * 0.82],
                 &cab,
             );
-            lights(&mut m, &fr, hl - 0.05, hw, zb - 0.15, a.braking);
+            lights(&mut m, &fr, hl - 0.05, hw, zb - 0.15, a.braking, a.blinkers);
         }
         ActorKind::Bus => {
             let r = 0.5;
@@ -338,7 +348,7 @@ pub(crate) fn actor(out: &mut Vec<Tri3>, a: &ActorView, origin: Vec2, id: u32) {
                 &[col, col, GLASS, GLASS, GLASS, GLASS],
             );
             m.bx(&fr, 0.0, 0.0, h * 0.86, h, hl, hw, &all(scale(col, 1.05)));
-            lights(&mut m, &fr, hl, hw, h * 0.3, a.braking);
+            lights(&mut m, &fr, hl, hw, h * 0.3, a.braking, a.blinkers);
         }
         ActorKind::Truck => {
             let r = 0.5;
@@ -359,7 +369,7 @@ pub(crate) fn actor(out: &mut Vec<Tri3>, a: &ActorView, origin: Vec2, id: u32) {
             );
             let box_l = l - cab_l - 0.2;
             m.bx(&fr, -hl + box_l * 0.5, 0.0, r * 1.4, h, box_l * 0.5, hw, &all(scale(col, 1.15)));
-            lights(&mut m, &fr, hl, hw, r * 1.6, a.braking);
+            lights(&mut m, &fr, hl, hw, r * 1.6, a.braking, a.blinkers);
         }
         ActorKind::Motorcycle | ActorKind::Cyclist => {
             let moto = a.kind == ActorKind::Motorcycle;

@@ -115,6 +115,7 @@ fn car(id: u32, pose: Pose, color: [u8; 3]) -> ActorView {
         height_m: 1.5,
         color,
         braking: false,
+        blinkers: 0,
     }
 }
 

@@ -178,6 +178,7 @@ impl World {
             height_m: params.height_m,
             color: scenario.ego.color,
             braking: false,
+            blinkers: 0,
         };
         let mut collision = CollisionWorld::new(ego.pose.pos, ego.pose, params.length_m, params.width_m);
         let mut actors = Vec::with_capacity(scenario.actors.len());
@@ -200,6 +201,7 @@ impl World {
                 height_m: a.height_m,
                 color: a.color,
                 braking: false,
+                blinkers: 0,
             };
             let brake_pending = matches!(&motion, Motion::Scripted(p) if p.brake.is_some());
             let collider = collision.add_actor(id, pose, a.length_m, a.width_m);
@@ -451,8 +453,18 @@ impl World {
         }
         let id =
             u32::try_from(self.actors.len() + 1).map_err(|_| Error::Simulation("too many actors".into()))?;
-        let view =
-            ActorView { id, kind, pose, speed_mps, length_m, width_m, height_m, color, braking: false };
+        let view = ActorView {
+            id,
+            kind,
+            pose,
+            speed_mps,
+            length_m,
+            width_m,
+            height_m,
+            color,
+            braking: false,
+            blinkers: 0,
+        };
         let collider = self.collision.add_actor(id, pose, length_m, width_m);
         self.actors.push(ActorRt {
             view,
@@ -531,6 +543,7 @@ impl World {
                     rt.view.pose = a.pose;
                     rt.view.speed_mps = a.speed_mps;
                     rt.view.braking = a.signals & traffic::SIGNAL_BRAKELIGHT != 0;
+                    rt.view.blinkers = traffic::blinkers(a.signals);
                     rt.signals = a.signals;
                     rt.traffic_frame = gen;
                     let h = rt.collider;
@@ -559,6 +572,7 @@ impl World {
                         height_m: a.height_m,
                         color: a.color,
                         braking: a.signals & traffic::SIGNAL_BRAKELIGHT != 0,
+                        blinkers: traffic::blinkers(a.signals),
                     };
                     let collider = self.collision.add_actor(id, a.pose, a.length_m, a.width_m);
                     self.actors.push(ActorRt {

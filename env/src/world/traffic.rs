@@ -23,6 +23,18 @@ pub const SIGNAL_BLINKER_LEFT: u32 = 2;
 pub const SIGNAL_BLINKER_EMERGENCY: u32 = 4;
 pub const SIGNAL_BRAKELIGHT: u32 = 8;
 
+/// SUMO's blinker bits as [`crate::view::ActorView::blinkers`] (emergency = both sides).
+pub fn blinkers(signals: u32) -> u8 {
+    let mut b = 0;
+    if signals & (SIGNAL_BLINKER_RIGHT | SIGNAL_BLINKER_EMERGENCY) != 0 {
+        b |= crate::view::BLINKER_RIGHT;
+    }
+    if signals & (SIGNAL_BLINKER_LEFT | SIGNAL_BLINKER_EMERGENCY) != 0 {
+        b |= crate::view::BLINKER_LEFT;
+    }
+    b
+}
+
 /// One traffic vehicle at the end of a tick.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TrafficAgent {
