@@ -64,6 +64,9 @@ struct Run {
     decision_us: f64,
 }
 
+/// The protocol's warm-up (`SimConfig::warmup_ticks`): ticks 1–4 run with zero control.
+const WARMUP: u64 = dh_env::sim::WARMUP_TICKS as u64;
+
 /// Drives one scenario with the expert; scored by the protocol's score tracker.
 fn run(s: &ResolvedScenario) -> Run {
     let mut world = World::new(s, s.seed).unwrap();
@@ -83,7 +86,9 @@ fn run(s: &ResolvedScenario) -> Run {
     let (mut max_offset_m, mut red_lights_run, mut decisions) = (0.0f64, 0, 0u32);
     let mut think = std::time::Duration::ZERO;
     loop {
-        if world.tick_count() % DECISION_INTERVAL_TICKS as u64 == 0 {
+        // As the protocol runs it: zero control for the warm-up ticks, then a decision every 5.
+        let tick_no = world.tick_count();
+        if tick_no >= WARMUP && (tick_no - WARMUP) % DECISION_INTERVAL_TICKS as u64 == 0 {
             let t0 = std::time::Instant::now();
             let a = expert.act_in_world(&world, route);
             think += t0.elapsed();
@@ -95,7 +100,13 @@ fn run(s: &ResolvedScenario) -> Run {
                 _ => {}
             }
             max_offset_m = max_offset_m.max(a.path_offset_m.abs());
-            let c = bridge.apply(Some(Decision::from(a)), world.ego().speed_mps);
+            // The env's action space is float32: a policy's decision arrives rounded to f32.
+            let d = Decision::from(a);
+            let d = Decision {
+                steer: d.steer as f32 as f64,
+                target_speed_mps: d.target_speed_mps as f32 as f64,
+            };
+            let c = bridge.apply(Some(d), world.ego().speed_mps);
             control = Control { throttle: c.throttle, brake: c.brake, steer: c.steer };
         }
         let r = world.tick(&control).unwrap();
@@ -206,7 +217,9 @@ fn forced_red_at_the_signalised_crossing_holds_the_ego() {
         (Control::default(), 0u32, 0u32, f64::NEG_INFINITY);
     let mut light_decisions = 0;
     while world.time_s() < 60.0 {
-        if world.tick_count() % DECISION_INTERVAL_TICKS as u64 == 0 {
+        // As the protocol runs it: zero control for the warm-up ticks, then a decision every 5.
+        let tick_no = world.tick_count();
+        if tick_no >= WARMUP && (tick_no - WARMUP) % DECISION_INTERVAL_TICKS as u64 == 0 {
             let ego = *world.ego();
             let mut lights = world.lights().to_vec();
             for l in &mut lights {
