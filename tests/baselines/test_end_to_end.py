@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -32,6 +33,34 @@ INTERSECTION = builtin_root() / "r4" / "04_intersection" / "town01_04_straight_c
 T_JUNCTION = builtin_root() / "r4" / "05_t_intersection" / "town01_05_left_turn_t.toml"
 
 
+# The ten scenarios the suite started with (one per category): small enough for a CI-sized BC /
+# DAgger run, and what these tests' thresholds were set on.
+CLASSIC = [
+    "01_pedestrian/town01_01_midblock_crossing",
+    "02_obstacles/town01_02_cones_right_lane",
+    "03_turning/town01_03_right_turn_signalised",
+    "04_intersection/town01_04_straight_cross_traffic",
+    "05_t_intersection/town01_05_left_turn_t",
+    "06_traffic_flow/ingolstadt_06_westbound_flow",
+    "07_sudden_brake/town01_07_lead_brakes",
+    "08_merging/town01_08_join_main_road",
+    "09_yielding/town01_09_yield_left_turn",
+    "10_roundabout/town01_10_roundabout_exit_south",
+]
+
+
+@pytest.fixture(scope="module")
+def suite(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A `--suite DIR` folder with the classic ten scenarios, the maps linked beside it."""
+    root = tmp_path_factory.mktemp("suite")
+    os.symlink(builtin_root() / "maps", root / "maps")
+    for rel in CLASSIC:
+        src = builtin_root() / "r4" / f"{rel}.toml"
+        (root / "r4" / src.parent.name).mkdir(parents=True, exist_ok=True)
+        shutil.copy(src, root / "r4" / src.parent.name / src.name)
+    return root / "r4"
+
+
 def cli(*args: str) -> None:
     assert main([str(a) for a in args]) == 0
 
@@ -42,10 +71,10 @@ def scores(out: Path) -> dict[str, float]:
 
 
 @pytest.fixture(scope="module")
-def demos(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def demos(tmp_path_factory: pytest.TempPathFactory, suite: Path) -> Path:
     data = tmp_path_factory.mktemp("demos")
     # 14 episodes = each of the 7 training scenarios twice (once clean, once with DART noise).
-    cli("baselines", "collect", "--agent", "expert", "--suite", "builtin", "--episodes", "14", "--out", data)
+    cli("baselines", "collect", "--agent", "expert", "--suite", suite, "--episodes", "14", "--out", data)
     return data
 
 
@@ -67,9 +96,9 @@ def test_collect_writes_a_minari_dataset_with_expert_labels(demos: Path) -> None
     assert meta["mean_score"] > 50.0
 
 
-def test_bc_beats_zero_speed_through_r4_evaluate(demos: Path, tmp_path: Path) -> None:
+def test_bc_beats_zero_speed_through_r4_evaluate(demos: Path, suite: Path, tmp_path: Path) -> None:
     out = tmp_path / "bc"
-    cli("baselines", "train", "bc", "--data", demos, "--suite", "builtin", "--epochs", "40", "--out", out)
+    cli("baselines", "train", "bc", "--data", demos, "--suite", suite, "--epochs", "40", "--out", out)
     model = out / "model.zip"
     meta = read_meta(model)
     assert meta["algo"] == "ppo" and meta["trained_by"] == "bc" and meta["wrapper"]["obs"] == "state"
@@ -77,8 +106,8 @@ def test_bc_beats_zero_speed_through_r4_evaluate(demos: Path, tmp_path: Path) ->
         f"{Path(p).parent.name}__{Path(p).stem}"
         for p in json.loads((out / "split.json").read_text())["train"]
     }
-    cli("r4", "evaluate", "--agent", f"sb3:{model}", "--suite", "builtin", "--out", tmp_path / "ev_bc")
-    cli("r4", "evaluate", "--agent", "zero", "--suite", "builtin", "--out", tmp_path / "ev_zero")
+    cli("r4", "evaluate", "--agent", f"sb3:{model}", "--suite", suite, "--out", tmp_path / "ev_bc")
+    cli("r4", "evaluate", "--agent", "zero", "--suite", suite, "--out", tmp_path / "ev_zero")
     bc, zero = scores(tmp_path / "ev_bc"), scores(tmp_path / "ev_zero")
     bc_train = float(np.mean([bc[k] for k in train]))
     zero_train = float(np.mean([zero[k] for k in train]))
@@ -87,10 +116,12 @@ def test_bc_beats_zero_speed_through_r4_evaluate(demos: Path, tmp_path: Path) ->
     assert manifest["agent"] == f"sb3:{model}"
 
 
-def test_dagger_aggregates_expert_labels_of_its_own_rollouts(demos: Path, tmp_path: Path) -> None:
+def test_dagger_aggregates_expert_labels_of_its_own_rollouts(
+    demos: Path, suite: Path, tmp_path: Path
+) -> None:
     out = tmp_path / "dagger"
     cli(
-        *("baselines", "train", "dagger", "--data", demos, "--suite", "builtin"),
+        *("baselines", "train", "dagger", "--data", demos, "--suite", suite),
         *("--iterations", "2", "--epochs", "8", "--out", out),
     )
     log = [json.loads(x) for x in (out / "train_log.jsonl").read_text().splitlines()]

@@ -111,10 +111,10 @@ def test_shaped_reward_never_changes_the_benchmark_score() -> None:
 def test_split_is_by_file_stable_and_validated() -> None:
     suite = builtin_scenarios()
     train, held = split_suite(suite, 0.3)
-    assert len(held) == 3 and len(train) == 7 and not set(train) & set(held)
+    assert len(held) == 30 and len(train) == 70 and not set(train) & set(held)
     assert split_suite(list(reversed(suite)), 0.3)[1] == sorted(held, key=list(reversed(suite)).index)
     train2, held2 = split_suite(suite, ["01_pedestrian/town01_01_midblock_crossing"])
-    assert [p.parent.name for p in held2] == ["01_pedestrian"] and len(train2) == 9
+    assert [p.parent.name for p in held2] == ["01_pedestrian"] and len(train2) == 99
     with pytest.raises(ConfigError, match="99_none/x"):
         split_suite(suite, ["99_none/x"])
     with pytest.raises(ConfigError, match="held_out"):

@@ -51,8 +51,8 @@ def test_preview_writes_front_and_bev(tmp_path: Path, capsys: pytest.CaptureFixt
     assert main(["scenario", "preview", SCEN, "--out", str(tmp_path)]) == 0
     paths = [Path(p) for p in capsys.readouterr().out.split()]
     assert [p.name for p in paths] == [
-        "07_sudden_brake__town01_lead_brakes_front.png",
-        "07_sudden_brake__town01_lead_brakes_bev.png",
+        "07_sudden_brake__town01_07_lead_brakes_front.png",
+        "07_sudden_brake__town01_07_lead_brakes_bev.png",
     ]
     front, bev = (Image.open(p) for p in paths)
     assert front.size == (800, 450) and bev.size == (800, 800)

@@ -130,11 +130,12 @@ def test_outage_mid_run_aborts_cleanly_and_a_rerun_resumes(tmp_path: Path) -> No
     with ScriptedOpenAIServer(flaky) as url, pytest.raises(runner.BatchAborted, match="server_unavailable"):
         runner.evaluate(scenarios, out, _opts(url, max_retries=1), log=lambda _: None)
     finished = runner.read_results(out)
-    assert list(finished) == ["02_obstacles__town01_cones_right_lane"]  # 50 decisions, then the outage
+    assert list(finished) == ["02_obstacles__town01_02_cones_right_lane"]  # 50 decisions, then the outage
     (aborted,) = _lines(out / "aborted.jsonl")
     assert aborted["key"] == "06_traffic_flow__bs3d_09_left_turner_queue"
     assert aborted["vlm"]["transport_errors"] == 3 and "HTTP 503" in aborted["last_error"]
-    assert not (out / "scenes" / "09_yielding__town01_yield_left_turn").exists(), "nothing new after an abort"
+    aborted_after = out / "scenes" / "09_yielding__town01_09_yield_left_turn"
+    assert not aborted_after.exists(), "nothing new after an abort"
     assert not (out / "summary.json").exists()
 
     with ScriptedOpenAIServer(route_driver) as url:
@@ -173,8 +174,8 @@ def test_seeds_give_keys_intervals_and_reproducible_episodes(tmp_path: Path) -> 
         a = runner.evaluate(short_scenarios(2), tmp_path / "a", _opts(url, seeds=2, jobs=4), log=print)
         b = runner.evaluate(short_scenarios(2), tmp_path / "b", _opts(url, seeds=2, jobs=1), log=print)
     assert [r["key"] for r in a] == [
-        "02_obstacles__town01_cones_right_lane__s0",
-        "02_obstacles__town01_cones_right_lane__s1",
+        "02_obstacles__town01_02_cones_right_lane__s0",
+        "02_obstacles__town01_02_cones_right_lane__s1",
         "06_traffic_flow__bs3d_09_left_turner_queue__s0",
         "06_traffic_flow__bs3d_09_left_turner_queue__s1",
     ]
