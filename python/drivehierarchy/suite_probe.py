@@ -163,6 +163,8 @@ def markdown(rows: list[dict[str, Any]], summary: dict[str, Any]) -> str:
 
 def _short(row: dict[str, Any]) -> str:
     ev = [e for e in row["events"] if e.startswith("collision")]
+    if row["termination"].startswith("collision_"):
+        return ", ".join(e.replace("collision_", "hit ") for e in ev)
     term = {
         "destination_reached": "done",
         "scenario_timeout": "timeout",
