@@ -102,10 +102,8 @@ fn run(s: &ResolvedScenario) -> Run {
             max_offset_m = max_offset_m.max(a.path_offset_m.abs());
             // The env's action space is float32: a policy's decision arrives rounded to f32.
             let d = Decision::from(a);
-            let d = Decision {
-                steer: d.steer as f32 as f64,
-                target_speed_mps: d.target_speed_mps as f32 as f64,
-            };
+            let d =
+                Decision { steer: d.steer as f32 as f64, target_speed_mps: d.target_speed_mps as f32 as f64 };
             let c = bridge.apply(Some(d), world.ego().speed_mps);
             control = Control { throttle: c.throttle, brake: c.brake, steer: c.steer };
         }
