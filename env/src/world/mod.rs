@@ -465,10 +465,18 @@ impl World {
             braking: false,
             blinkers: 0,
         };
-        let collider = self.collision.add_actor(id, pose, length_m, width_m);
+        self.push_driven_actor(view, Motion::External, 0, 0);
+        self.views.push(view);
+        Ok(id)
+    }
+
+    /// Adds an actor whose pose is driven from outside its script (an external actor or a
+    /// traffic vehicle): moving from now on, with a collider at its pose.
+    fn push_driven_actor(&mut self, view: ActorView, motion: Motion, traffic_frame: u64, signals: u32) {
+        let collider = self.collision.add_actor(view.id, view.pose, view.length_m, view.width_m);
         self.actors.push(ActorRt {
             view,
-            motion: Motion::External,
+            motion,
             collider,
             s: 0.0,
             phase: Phase::Moving,
@@ -477,11 +485,9 @@ impl World {
             brake_at_s: f64::INFINITY,
             end_at_s: f64::INFINITY,
             removed: false,
-            traffic_frame: 0,
-            signals: 0,
+            traffic_frame,
+            signals,
         });
-        self.views.push(view);
-        Ok(id)
     }
 
     /// Plugs a traffic model in and starts it (the vehicles present at t = 0 appear now).
@@ -574,21 +580,7 @@ impl World {
                         braking: a.signals & traffic::SIGNAL_BRAKELIGHT != 0,
                         blinkers: traffic::blinkers(a.signals),
                     };
-                    let collider = self.collision.add_actor(id, a.pose, a.length_m, a.width_m);
-                    self.actors.push(ActorRt {
-                        view,
-                        motion: Motion::Traffic(a.key),
-                        collider,
-                        s: 0.0,
-                        phase: Phase::Moving,
-                        triggered_at_s: self.time_s(),
-                        brake_pending: false,
-                        brake_at_s: f64::INFINITY,
-                        end_at_s: f64::INFINITY,
-                        removed: false,
-                        traffic_frame: gen,
-                        signals: a.signals,
-                    });
+                    self.push_driven_actor(view, Motion::Traffic(a.key), gen, a.signals);
                     self.traffic_ids.insert(a.key, id);
                     changed = true;
                 }
