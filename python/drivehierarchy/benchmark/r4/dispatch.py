@@ -31,7 +31,7 @@ class Dispatch:
         self.pool = ThreadPoolExecutor(max_workers=max(2, opts.jobs), thread_name_prefix="r4")
         # libsumo runs one simulation per process: with several jobs, scenarios with SUMO traffic
         # run in worker processes (one libsumo each; Ray tasks have their own processes anyway).
-        self.workers = WorkerPool() if self.remote is None and opts.jobs > 1 else None
+        self.workers = WorkerPool(opts.worker_timeout_s) if self.remote is None and opts.jobs > 1 else None
 
     async def run(self, job: Job) -> dict[str, Any]:
         opts, out, driver, pool = self.opts, self.out, self.driver, self.pool

@@ -65,21 +65,25 @@ def run_scene(job: Job, opts: RunOptions, out: Path) -> dict[str, Any]:
         # video renders its own small frames.
         config = config.replace(front=None, bev=None)
     env = DriveHierarchyR4Env(scenario=job.scenario, config=config)
-    scene_dir = fresh_scene_dir(out, job, opts.frames)
-    gif = _core.GifWriter(str(scene_dir / "episode.gif"), fps=4) if opts.video else None
+    gif = None
+    try:  # the env (and its SUMO) is closed however the scene ends: the next one may need libsumo
+        scene_dir = fresh_scene_dir(out, job, opts.frames)
+        gif = _core.GifWriter(str(scene_dir / "episode.gif"), fps=4) if opts.video else None
 
-    def on_step(step: int, obs: dict[str, Any], reward: float, info: dict[str, Any]) -> None:
-        if opts.frames:
-            save_frames(scene_dir / "frames", step, obs)
-        if gif is not None:
-            gif.push(env.sim.render_camera(VIDEO_CAMERA_JSON))
+        def on_step(step: int, obs: dict[str, Any], reward: float, info: dict[str, Any]) -> None:
+            if opts.frames:
+                save_frames(scene_dir / "frames", step, obs)
+            if gif is not None:
+                gif.push(env.sim.render_camera(VIDEO_CAMERA_JSON))
 
-    t0 = time.perf_counter()
-    try:
+        t0 = time.perf_counter()
         result = run_episode(env, agent, seed=job.seed, on_step=on_step)
+        wall = time.perf_counter() - t0
+        if gif is not None:
+            gif.close()
+            gif = None
+        return finish_scene(env, job, opts, scene_dir, result.steps, wall, {})
     finally:
         if gif is not None:
             gif.close()
-    line = finish_scene(env, job, opts, scene_dir, result.steps, time.perf_counter() - t0, {})
-    env.close()
-    return line
+        env.close()

@@ -36,6 +36,10 @@ class RunOptions:
     vlm: Any = None  # VLMOptions when agent == "vlm"
     ray_address: str | None = None
     progress: bool = False
+    # The longest one call to a SUMO worker process may take before the worker counts as hung and
+    # is killed (its scenario fails, the others go on); None: no limit. For a registry agent one
+    # call drives the whole scenario; for the VLM agent, one env step or message.
+    worker_timeout_s: float | None = 600.0
 
     def seed_list(self) -> list[int]:
         if self.seeds < 1:

@@ -5,7 +5,9 @@ Layout of an output directory:
     manifest.json                     version, git commit, agent, model, decoding, controls,
                                       config, seeds, scenario hashes
     results.jsonl                     one results line (scene score record + run facts) per
-                                      finished scenario (append-only, flushed and synced)
+                                      finished scenario, or a failure line (`system_error`) per
+                                      scenario failed by infrastructure (append-only, synced; the
+                                      last line of a key wins)
     aborted.jsonl                     scenarios aborted by the batch-abort rule (append-only log)
     scenes/<category>__<name>[__s<seed>]/
         scene_score.json              the protocol's record (+ ours)
@@ -17,22 +19,29 @@ Layout of an output directory:
                                       parsed action or failure kind, latency, attempts, control
         frames/NNNN_front.png, NNNN_bev.png   (--frames)
         episode.gif                   (--video)
+        error.json                    why the scenario failed (kind, exception type, message,
+                                      traceback; a worker's pid and exit code), when it did
     summary.json, summary.csv, summary.md   category means (± bootstrap 95 % intervals when a
                                       category has several runs) and the R4 score
     table2.md, table2.csv, r4_summary.csv   the paper's Table 2 row and the `openloop report --r4` input
 
-A scenario counts as done once its line is in results.jsonl (written last), so a run killed at any
-point resumes without redoing or losing finished scenarios; an unfinished scenario's directory is
-wiped and the scenario redone from scratch.
+A scenario counts as done once its results line is in results.jsonl (written last), so a run killed
+at any point resumes without redoing or losing finished scenarios; an unfinished or failed
+scenario's directory is wiped and the scenario redone from scratch.
+
+Faults (`faults.py`): SUMO killed or crashed, a worker that hangs past `worker_timeout_s`, or any
+unexpected exception in one scenario (its env, its agent, its files) fail that scenario only: it is
+recorded with the `system_error` termination (not scored) and an error.json, the batch goes on, the
+summary lists it under `failed`, and the run raises `ScenariosFailed` naming it (`r4 evaluate`
+exits 4); the same command redoes only the failed scenarios. A results write that fails (disk
+full) stops the run with `ResultWriteError` and leaves no partial line.
 
 Up to `jobs` scenarios are in flight at once (asyncio): a VLM agent's requests from all of them
 go out from this process's one connection pool and reach the server together so it can batch
 them, while each scenario's world stays frozen during its own request, as in the original. Env
 steps and message building run in a thread pool (the Rust step releases the GIL); with several
 jobs, scenarios with SUMO traffic run their env in a worker process each (`workers.py`: libsumo
-runs one simulation per process). A worker that dies fails its scenario with `WorkerDied` (the
-others go on; the run then fails naming it and a rerun redoes it). `ray_address` runs each
-scenario as a Ray task instead.
+runs one simulation per process). `ray_address` runs each scenario as a Ray task instead.
 
 The code: `agents.py` (the registry), `jobs.py` (options, jobs, the suite), `store.py` (results
 log, manifest, files), `drive.py` / `vlm_drive.py` (one scenario), `dispatch.py` (where a
@@ -49,14 +58,16 @@ fails with `BatchAborted`; the same command resumes it, redoing the aborted scen
 from __future__ import annotations
 
 import asyncio
+import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
-from drivehierarchy._core import ConfigError, DriveHierarchyError, SimulationError
+from drivehierarchy._core import ConfigError, DriveHierarchyError
 from drivehierarchy.benchmark.r4.agents import AGENTS, VLM_AGENT, AgentRegistry, ConstantAgent
 from drivehierarchy.benchmark.r4.dispatch import Dispatch, Progress
 from drivehierarchy.benchmark.r4.drive import VIDEO_CAMERA_JSON, run_scene
+from drivehierarchy.benchmark.r4.faults import ScenariosFailed, error_report, failure_line
 from drivehierarchy.benchmark.r4.jobs import (
     Job,
     RunOptions,
@@ -67,8 +78,10 @@ from drivehierarchy.benchmark.r4.jobs import (
     uses_sumo,
 )
 from drivehierarchy.benchmark.r4.store import (
+    ResultWriteError,
     append_line,
     check_manifest,
+    read_failures,
     read_results,
     write_json_atomic,
     write_manifest,
@@ -81,7 +94,7 @@ from drivehierarchy.benchmark.r4.summary import (
     write_summary,
 )
 from drivehierarchy.benchmark.r4.vlm_drive import VlmScene, drive_vlm_scene
-from drivehierarchy.benchmark.r4.workers import WorkerDied
+from drivehierarchy.benchmark.r4.workers import WorkerDied, WorkerTimeout
 
 __all__ = [
     "AGENTS",
@@ -91,14 +104,19 @@ __all__ = [
     "BatchAborted",
     "ConstantAgent",
     "Job",
+    "ResultWriteError",
     "RunOptions",
+    "ScenariosFailed",
     "VlmScene",
+    "WorkerDied",
+    "WorkerTimeout",
     "bootstrap_ci",
     "drive_vlm_scene",
     "evaluate",
     "evaluate_async",
     "expected_duration_s",
     "jobs_for",
+    "read_failures",
     "read_results",
     "rescore_dir",
     "run_scene",
@@ -118,8 +136,9 @@ class BatchAborted(DriveHierarchyError):
 async def evaluate_async(
     scenarios: Iterable[Path], out: Path, opts: RunOptions, *, log: Callable[[str], None] = print
 ) -> list[dict[str, Any]]:
-    """Runs every job not yet in `out/results.jsonl`, up to `opts.jobs` at once; returns all
-    results in suite order. Raises `BatchAborted` under the batch-abort rule."""
+    """Runs every job not yet finished in `out/results.jsonl`, up to `opts.jobs` at once; returns
+    all results in suite order. Raises `BatchAborted` under the batch-abort rule and
+    `ScenariosFailed` (after writing the summary of the others) when scenarios failed."""
     if opts.jobs < 1:
         raise ConfigError(f"config `jobs` = {opts.jobs!r}: expected ≥ 1")
     is_vlm = opts.agent == VLM_AGENT
@@ -164,19 +183,28 @@ async def evaluate_async(
         async with sem:
             if aborted:
                 return  # the batch is stopping: start nothing new
+            t0 = time.perf_counter()
             try:
-                await run_one(job)
-            except WorkerDied as exc:
-                # That scenario is lost (redone from scratch on resume); the others go on.
-                failed.append((job, exc))
-                scene_dir = out / "scenes" / job.key
-                scene_dir.mkdir(parents=True, exist_ok=True)
-                write_json_atomic(scene_dir / "error.json", {"key": job.key, "error": str(exc)})
-                log(f"[{index[job.key]}/{len(jobs)}] {job.key}: FAILED ({exc})")
-                progress.fail()
+                line = await dispatch.run(job)
+            except (ResultWriteError, asyncio.CancelledError):
+                raise  # nothing more can be recorded / the run is being torn down
+            except Exception as exc:
+                # Infrastructure failed this scenario (SUMO killed, a hung worker, an exception in
+                # the scene or its agent): recorded as failed, redone on resume; the others go on.
+                fail(job, exc, time.perf_counter() - t0)
+                return
+            record(job, line)
 
-    async def run_one(job: Job) -> None:
-        line = await dispatch.run(job)
+    def fail(job: Job, exc: BaseException, wall: float) -> None:
+        failed.append((job, exc))
+        scene_dir = out / "scenes" / job.key
+        scene_dir.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(scene_dir / "error.json", error_report(job, exc))
+        append_line(out / "results.jsonl", failure_line(job, opts, exc, wall))
+        log(f"[{index[job.key]}/{len(jobs)}] {job.key}: FAILED, system_error ({type(exc).__name__}: {exc})")
+        progress.fail()
+
+    def record(job: Job, line: dict[str, Any]) -> None:
         i = index[job.key]
         if "aborted" in line:
             aborted.append(line)
@@ -210,17 +238,20 @@ async def evaluate_async(
             f"last error: {first.get('last_error')}). Batch aborted as the original does: "
             f"{len(done)}/{len(jobs)} scenarios finished; run the same command again to resume."
         )
+    results = [done[j.key] for j in jobs if j.key in done]
+    failed_keys = sorted(j.key for j, _ in failed)
+    if results or not failed:
+        write_summary(out, results, model=opts.model_name(), failed=failed_keys)
     if failed:
         job, exc = failed[0]
         more = ", ".join(j.key for j, _ in failed[1:])
-        raise SimulationError(
-            f"scenario {job.key}: {exc}"
+        raise ScenariosFailed(
+            f"scenario {job.key}: {type(exc).__name__}: {exc}"
             + (f" (and {len(failed) - 1} more: {more})" if more else "")
-            + f". {len(done)}/{len(jobs)} scenarios finished; run the same command again to resume "
-            "(failed scenarios are redone from scratch)."
+            + f". {len(done)}/{len(jobs)} scenarios finished; the failed ones are recorded as "
+            "system_error (see their error.json); run the same command again to redo only them.",
+            failed_keys,
         ) from exc
-    results = [done[j.key] for j in jobs]
-    write_summary(out, results, model=opts.model_name())
     return results
 
 

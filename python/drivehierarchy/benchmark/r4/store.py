@@ -1,8 +1,14 @@
-"""An R4 run's files: the append-only results log (flushed and synced per line, torn lines
-skipped), the manifest, atomic JSON/text writes and the per-scenario folders."""
+"""An R4 run's files: the append-only results log (synced per line, torn lines skipped), the
+manifest, atomic JSON/text writes and the per-scenario folders.
+
+results.jsonl holds a scenario's results line once it finished, or a failure line (`"termination_reason":
+"system_error"`) when infrastructure failed it; the last line of a key wins, and only finished
+scenarios count as done, so a resume redoes the failed ones. A write that fails (disk full, I/O
+error) raises `ResultWriteError` and leaves no partial line or file behind."""
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -13,17 +19,33 @@ from pathlib import Path
 from typing import Any
 
 from drivehierarchy import __version__
-from drivehierarchy._core import ConfigError
+from drivehierarchy._core import ConfigError, DriveHierarchyError
 from drivehierarchy._manifest import git_commit
 from drivehierarchy.benchmark.r4.jobs import Job, RunOptions
 
 
+class ResultWriteError(DriveHierarchyError):
+    """A run's file could not be written (disk full, I/O error); nothing partial was left behind.
+    The batch stops: nothing more could be recorded."""
+
+
 def read_results(out: Path) -> dict[str, dict[str, Any]]:
-    """Finished scenarios of a run by key; a torn last line (killed mid-write) is ignored."""
-    return read_jsonl_by_key(out / "results.jsonl")
+    """Finished scenarios of a run by key (a later line for a key wins; failure lines and a torn
+    last line, killed mid-write, do not count)."""
+    return {k: r for k, r in read_jsonl_by_key(out / "results.jsonl").items() if not is_failure(r)}
+
+
+def read_failures(out: Path) -> dict[str, dict[str, Any]]:
+    """Scenarios whose last results line is a failure (redone on resume)."""
+    return {k: r for k, r in read_jsonl_by_key(out / "results.jsonl").items() if is_failure(r)}
+
+
+def is_failure(line: dict[str, Any]) -> bool:
+    return "system_error" in line
 
 
 def read_jsonl_by_key(path: Path) -> dict[str, dict[str, Any]]:
+    """The last complete line of every key."""
     done: dict[str, dict[str, Any]] = {}
     if not path.exists():
         return done
@@ -35,34 +57,60 @@ def read_jsonl_by_key(path: Path) -> dict[str, dict[str, Any]]:
                 rec = json.loads(line)
             except json.JSONDecodeError:
                 continue
-            done.setdefault(rec["key"], rec)
+            done[rec["key"]] = rec
     return done
 
 
 def append_line(path: Path, record: dict[str, Any]) -> None:
-    data = json.dumps(record, sort_keys=True) + "\n"
-    # A line torn by a kill is closed first (and then skipped as invalid JSON), never extended.
-    if path.exists() and path.stat().st_size > 0:
-        with path.open("rb") as fh:
-            fh.seek(-1, os.SEEK_END)
-            if fh.read(1) != b"\n":
-                data = "\n" + data
-    with path.open("a", encoding="utf-8") as fh:
-        fh.write(data)
-        fh.flush()
-        os.fsync(fh.fileno())
+    """Appends one JSON line and syncs it to disk; on failure the file is cut back to what it was."""
+    data = (json.dumps(record, sort_keys=True) + "\n").encode("utf-8")
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_APPEND, 0o644)
+    except OSError as exc:
+        raise _write_error(path, record, exc) from exc
+    try:
+        size = os.fstat(fd).st_size
+        if size > 0 and os.pread(fd, 1, size - 1) != b"\n":
+            # A line torn by a kill is closed first (and then skipped as invalid JSON), never extended.
+            data = b"\n" + data
+        try:
+            view = memoryview(data)
+            while view:
+                view = view[os.write(fd, view) :]
+            os.fsync(fd)
+        except OSError as exc:
+            with contextlib.suppress(OSError):
+                os.ftruncate(fd, size)  # no partial line stays behind
+                os.fsync(fd)
+            raise _write_error(path, record, exc) from exc
+    finally:
+        os.close(fd)
+
+
+def _write_error(path: Path, record: dict[str, Any], exc: OSError) -> ResultWriteError:
+    return ResultWriteError(
+        f"{path}: could not record scenario {record.get('key')!r} ({type(exc).__name__}: {exc}); "
+        "the file is left as it was. Free space or fix the disk, then run the same command again "
+        "to resume."
+    )
 
 
 def write_json_atomic(path: Path, obj: Any) -> None:
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(obj, indent=2, sort_keys=True) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
+    write_text_atomic(path, json.dumps(obj, indent=2, sort_keys=True) + "\n")
 
 
 def write_text_atomic(path: Path, text: str) -> None:
+    """Writes a whole file or nothing: a temporary file renamed over `path`."""
     tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+    except OSError as exc:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise ResultWriteError(
+            f"{path}: could not write ({type(exc).__name__}: {exc}); the file is left as it was"
+        ) from exc
 
 
 def _sha256(path: Path) -> str:

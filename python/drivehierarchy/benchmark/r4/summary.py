@@ -28,10 +28,11 @@ def bootstrap_ci(values: list[float], seed: int = 0) -> tuple[float, float] | No
     return float(lo), float(hi)
 
 
-def summarize(results: list[dict[str, Any]]) -> dict[str, Any]:
+def summarize(results: list[dict[str, Any]], failed: list[str] | None = None) -> dict[str, Any]:
     """Category means (± bootstrap 95 % intervals over the category's runs: scenarios × seeds)
     and the model's R4 score (mean of the categories present, with an interval from resampling
-    within every category)."""
+    within every category). `failed`: keys of scenarios that failed with a system error; they
+    are listed, not scored (a resume redoes them)."""
     by_cat: dict[str, list[float]] = {}
     for r in results:
         by_cat.setdefault(r["category"], []).append(float(r["score"]["score_composed"]))
@@ -57,6 +58,7 @@ def summarize(results: list[dict[str, Any]]) -> dict[str, Any]:
         "scenarios": len(results),
         "seeds": sorted({int(r.get("seed", 0)) for r in results}),
         "completed": sum(r["score"]["termination_reason"] == "destination_reached" for r in results),
+        "failed": sorted(failed or []),
     }
     if vlm:
         out["decisions"] = sum(v["decisions"] for v in vlm)
@@ -65,12 +67,14 @@ def summarize(results: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
-def write_summary(out: Path, results: list[dict[str, Any]], model: str | None = None) -> dict[str, Any]:
+def write_summary(
+    out: Path, results: list[dict[str, Any]], model: str | None = None, failed: list[str] | None = None
+) -> dict[str, Any]:
     from drivehierarchy.benchmark.r4 import report
 
     if not results:
         raise ConfigError(f"{out}: no finished scenario to summarize")
-    summary = summarize(results)
+    summary = summarize(results, failed)
     if model is not None:
         summary["model"] = model
     write_json_atomic(out / "summary.json", summary)
@@ -113,6 +117,12 @@ def summary_table(results: list[dict[str, Any]], summary: dict[str, Any] | None 
         f"| **R4 (mean of categories)** | {summary['scenarios']} | **{summary['r4_score']:.2f}** "
         f"| {r4_ci_text} |"
     )
+    if summary.get("failed"):
+        lines += [
+            "",
+            f"**{len(summary['failed'])} scenario(s) failed with a system error** (not scored; run the "
+            f"same command again to redo them): {', '.join(summary['failed'])}",
+        ]
     return "\n".join(lines) + "\n"
 
 
