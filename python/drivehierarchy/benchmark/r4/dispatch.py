@@ -13,7 +13,7 @@ import numpy as np
 
 from drivehierarchy.benchmark.r4.agents import VLM_AGENT
 from drivehierarchy.benchmark.r4.drive import run_scene
-from drivehierarchy.benchmark.r4.jobs import Job, RunOptions, uses_sumo
+from drivehierarchy.benchmark.r4.jobs import Job, RunOptions
 from drivehierarchy.benchmark.r4.vlm_drive import drive_vlm_scene
 from drivehierarchy.benchmark.r4.workers import WorkerPool
 
@@ -22,8 +22,9 @@ class Dispatch:
     """Runs one job where it belongs and returns its results line (or an `aborted` line). Owns the
     thread pool, the worker processes and the Ray handle of a run; `close` releases them."""
 
-    def __init__(self, opts: RunOptions, out: Path, driver: Any) -> None:
+    def __init__(self, opts: RunOptions, out: Path, driver: Any, sumo: frozenset[Path] = frozenset()) -> None:
         self.opts = opts
+        self.sumo = sumo  # the scenarios with SUMO traffic (`jobs.uses_sumo`)
         self.out = out
         self.driver = driver
         ray = _ray_init(opts.ray_address) if opts.ray_address else None
@@ -38,7 +39,7 @@ class Dispatch:
         if self.remote is not None:
             line: dict[str, Any] = await self.remote.remote(job, opts, out)
             return line
-        if self.workers is not None and uses_sumo(job.scenario, opts.config):
+        if self.workers is not None and job.scenario in self.sumo:
             async with self.workers.worker(job.key) as w:
                 if driver is not None:
                     return await drive_vlm_scene(job, opts, out, driver, pool, worker=w)

@@ -8,9 +8,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from drivehierarchy import _core
 from drivehierarchy._core import ConfigError
 from drivehierarchy.envs.config import R4Config
-from drivehierarchy.scenarios import builtin_scenarios
+from drivehierarchy.scenarios import builtin_scenarios, sumo_home
 
 
 @dataclass(frozen=True)
@@ -89,15 +90,20 @@ def suite_scenarios(suite: str) -> list[Path]:
     return found
 
 
-_SUMO_MODE = re.compile(r'^\s*\[traffic\][^\[]*?^\s*mode\s*=\s*"sumo"', re.MULTILINE | re.DOTALL)
+def traffic_mode(scenario: Path, config: R4Config) -> str:
+    """The background traffic ("sumo", "native", "none") the env runs the scenario with: the
+    config's `traffic` override, else the scenario's `[traffic]` as the Rust loader resolves it
+    (a table without `mode` is SUMO). Loads the scenario, so a bad file is a `ScenarioError` here."""
+    from drivehierarchy.envs.traffic import resolve_traffic_mode  # imports libsumo on use
+
+    sim = _core.Sim(str(scenario), config.replace(front=None, bev=None).to_json(), sumo_home())
+    return resolve_traffic_mode(config.traffic, sim.scenario_traffic_mode)
 
 
 def uses_sumo(scenario: Path, config: R4Config) -> bool:
-    """Whether the scenario runs SUMO background traffic (config override, else its `[traffic]`)."""
-    mode = getattr(config, "traffic", None)
-    if mode is not None:
-        return bool(mode == "sumo")
-    return bool(_SUMO_MODE.search(scenario.read_text(encoding="utf-8")))
+    """Whether the scenario runs SUMO background traffic (then, with several jobs, it runs in a
+    worker process of its own: libsumo runs one simulation per process)."""
+    return traffic_mode(scenario, config) == "sumo"
 
 
 _REFERENCE_DURATION = re.compile(r"^\s*reference_duration_s\s*=\s*([0-9.eE+-]+)", re.MULTILINE)

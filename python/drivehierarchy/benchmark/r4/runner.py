@@ -147,6 +147,9 @@ async def evaluate_async(
     if not is_vlm:
         AGENTS.create(opts.agent)  # unknown names fail before anything is written
     jobs = jobs_for(scenarios, opts.seed_list())
+    # Every scenario is loaded (a bad file fails here, before anything is written) and its traffic
+    # resolved as the env will run it.
+    sumo = frozenset(p for p in {j.scenario for j in jobs} if uses_sumo(p, opts.config))
     check_manifest(out, opts)  # a directory of another run is refused before any request
     driver = None
     if is_vlm:
@@ -176,7 +179,7 @@ async def evaluate_async(
     progress = Progress(len(jobs), len(jobs) - len(todo), opts.progress, done)
     sem = asyncio.Semaphore(opts.jobs)
     aborted: list[dict[str, Any]] = []
-    dispatch = Dispatch(opts, out, driver)
+    dispatch = Dispatch(opts, out, driver, sumo)
     failed: list[tuple[Job, BaseException]] = []
 
     async def one(job: Job) -> None:
