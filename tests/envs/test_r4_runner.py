@@ -146,3 +146,10 @@ def test_a_bad_scenario_file_fails_the_run_before_anything_is_written(tmp_path: 
     with pytest.raises(ScenarioError, match=r"bad\.toml"):
         runner.evaluate([*two_scenarios(), bad], tmp_path / "run", runner.RunOptions(), log=print)
     assert not (tmp_path / "run").exists()
+
+
+def test_help_warns_that_sb3_archives_are_unpickled(capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(SystemExit):
+        main(["r4", "evaluate", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "unpickles" in text and "only load model files you trust" in text

@@ -18,7 +18,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
     def common(p: argparse.ArgumentParser) -> None:
         names = ", ".join([*runner.AGENTS.names(), runner.VLM_AGENT])
-        p.add_argument("--agent", default="expert", help=f"agent name ({names})")
+        p.add_argument(
+            "--agent",
+            default="expert",
+            help=f"agent name ({names}). sb3:PATH loads a Stable-Baselines3 archive, which unpickles "
+            "Python objects and so can run arbitrary code: only load model files you trust",
+        )
         p.add_argument("--out", type=Path, required=True, help="output directory (resumable)")
         p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
         p.add_argument("--frames", action="store_true", help="save front and BEV PNGs of every decision")
