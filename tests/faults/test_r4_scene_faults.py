@@ -47,6 +47,16 @@ class BreaksInOneCategory(ExpertAgent):
 runner.AGENTS.register(BreaksInOneCategory.name, BreaksInOneCategory)
 
 
+class MisconfiguredAgent(ExpertAgent):
+    name = "test-misconfigured"
+
+    def reset(self, env: Any, info: dict[str, Any]) -> None:
+        raise ConfigError("config `action_mode` = 'raw': this policy was trained on 'decision'")
+
+
+runner.AGENTS.register(MisconfiguredAgent.name, MisconfiguredAgent)
+
+
 def _summaries(out: Path) -> dict[str, bytes]:
     return {name: (out / name).read_bytes() for name in SUMMARY_FILES}
 
@@ -121,7 +131,11 @@ def test_the_env_failing_mid_episode_is_a_recorded_failure_and_the_next_sumo_sce
     assert json.loads((out / "scenes" / first / "error.json").read_text())["type"] == "SimulationError"
 
 
-def test_unexpected_errors_are_not_swallowed_outside_a_scene(tmp_path: Path) -> None:
-    """Errors of the run itself (bad options, another run's directory) still stop it at once."""
+def test_configuration_errors_stop_the_run_instead_of_failing_every_scenario(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="unknown agent"):
-        runner.evaluate([PEDESTRIAN], tmp_path, runner.RunOptions(agent="nobody"), log=print)
+        runner.evaluate([PEDESTRIAN], tmp_path / "a", runner.RunOptions(agent="nobody"), log=print)
+    out = tmp_path / "b"
+    with pytest.raises(ConfigError, match="trained on 'decision'"):
+        opts = runner.RunOptions(agent=MisconfiguredAgent.name)
+        runner.evaluate([PEDESTRIAN, SUDDEN_BRAKE], out, opts, log=print)
+    assert runner.read_results(out) == {} and runner.read_failures(out) == {}

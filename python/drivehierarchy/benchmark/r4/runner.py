@@ -30,7 +30,8 @@ at any point resumes without redoing or losing finished scenarios; an unfinished
 scenario's directory is wiped and the scenario redone from scratch.
 
 Faults (`faults.py`): SUMO killed or crashed, a worker that hangs past `worker_timeout_s`, or any
-unexpected exception in one scenario (its env, its agent, its files) fail that scenario only: it is
+unexpected exception in one scenario (its env, its agent, its files; a `ConfigError` is not
+unexpected: it stops the run) fail that scenario only: it is
 recorded with the `system_error` termination (not scored) and an error.json, the batch goes on, the
 summary lists it under `failed`, and the run raises `ScenariosFailed` naming it (`r4 evaluate`
 exits 4); the same command redoes only the failed scenarios. A results write that fails (disk
@@ -189,8 +190,10 @@ async def evaluate_async(
             t0 = time.perf_counter()
             try:
                 line = await dispatch.run(job)
-            except (ResultWriteError, asyncio.CancelledError):
-                raise  # nothing more can be recorded / the run is being torn down
+            except (ResultWriteError, ConfigError):
+                # Nothing more can be recorded / the run's configuration is wrong (every scenario
+                # would fail alike): the run stops with the error.
+                raise
             except Exception as exc:
                 # Infrastructure failed this scenario (SUMO killed, a hung worker, an exception in
                 # the scene or its agent): recorded as failed, redone on resume; the others go on.
