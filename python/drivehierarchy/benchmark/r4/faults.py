@@ -9,8 +9,10 @@ not scene faults: a failed request holds the previous control and is counted (`v
 
 from __future__ import annotations
 
+import dataclasses
 import traceback
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Literal
 
 from drivehierarchy._core import SimulationError
 from drivehierarchy.benchmark.r4.jobs import Job, RunOptions
@@ -26,42 +28,46 @@ class ScenariosFailed(SimulationError):
         self.failed = failed
 
 
-def failure_kind(exc: BaseException) -> str:
-    if isinstance(exc, WorkerTimeout):
-        return "worker_timeout"
-    if isinstance(exc, WorkerDied):
-        return "worker_died"
-    return "exception"
+FailureKind = Literal["worker_died", "worker_timeout", "exception"]
 
 
-def error_report(job: Job, exc: BaseException) -> dict[str, Any]:
-    """`error.json`: what failed the scenario, with the traceback (a worker's own traceback is
-    attached to its exception as a note) and, for a worker, its pid and exit code."""
-    report: dict[str, Any] = {
-        "key": job.key,
-        "scenario": str(job.scenario),
-        "seed": job.seed,
-        "kind": failure_kind(exc),
-        "type": type(exc).__name__,
-        "message": str(exc),
-        "traceback": "".join(traceback.format_exception(exc)),
-    }
-    if isinstance(exc, WorkerDied):
-        report["pid"] = exc.pid
-        report["exit_code"] = exc.exit_code
-    return report
+@dataclass(frozen=True)
+class SceneFailure:
+    """Why infrastructure failed one scenario (typed; serialised into its results line and its
+    `error.json`)."""
 
+    kind: FailureKind
+    type: str  # the exception's class name
+    message: str
+    traceback: str  # a worker's own traceback is attached to its exception as a note
+    pid: int | None = None  # the worker process, for worker faults
+    exit_code: int | None = None  # the worker's exit status (-N: killed by signal N)
 
-def failure_line(job: Job, opts: RunOptions, exc: BaseException, wall: float) -> dict[str, Any]:
-    """The results line of a failed scenario: ends with `system_error`, carries no score."""
-    return {
-        "key": job.key,
-        "scenario": str(job.scenario),
-        "category": job.category,
-        "agent": opts.agent,
-        "seed": job.seed,
-        "status": "Failed",
-        "termination_reason": "system_error",
-        "system_error": {"kind": failure_kind(exc), "type": type(exc).__name__, "message": str(exc)},
-        "wall_s": round(wall, 4),
-    }
+    @classmethod
+    def of(cls, exc: BaseException) -> SceneFailure:
+        kind: FailureKind = "exception"
+        pid = code = None
+        if isinstance(exc, WorkerDied):
+            kind = "worker_timeout" if isinstance(exc, WorkerTimeout) else "worker_died"
+            pid, code = exc.pid, exc.exit_code
+        tb = "".join(traceback.format_exception(exc))
+        return cls(kind, type(exc).__name__, str(exc), tb, pid, code)
+
+    def report(self, job: Job) -> dict[str, Any]:
+        """`error.json`."""
+        fields = {k: v for k, v in dataclasses.asdict(self).items() if v is not None}
+        return {"key": job.key, "scenario": str(job.scenario), "seed": job.seed, **fields}
+
+    def line(self, job: Job, opts: RunOptions, wall: float) -> dict[str, Any]:
+        """The results line of the failed scenario: ends with `system_error`, carries no score."""
+        return {
+            "key": job.key,
+            "scenario": str(job.scenario),
+            "category": job.category,
+            "agent": opts.agent,
+            "seed": job.seed,
+            "status": "Failed",
+            "termination_reason": "system_error",
+            "system_error": {"kind": self.kind, "type": self.type, "message": self.message},
+            "wall_s": round(wall, 4),
+        }

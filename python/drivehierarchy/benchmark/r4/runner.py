@@ -68,7 +68,7 @@ from drivehierarchy._core import ConfigError, DriveHierarchyError
 from drivehierarchy.benchmark.r4.agents import AGENTS, VLM_AGENT, AgentRegistry, ConstantAgent
 from drivehierarchy.benchmark.r4.dispatch import Dispatch, Progress
 from drivehierarchy.benchmark.r4.drive import VIDEO_CAMERA_JSON, run_scene
-from drivehierarchy.benchmark.r4.faults import ScenariosFailed, error_report, failure_line
+from drivehierarchy.benchmark.r4.faults import ScenariosFailed, SceneFailure
 from drivehierarchy.benchmark.r4.jobs import (
     Job,
     RunOptions,
@@ -108,6 +108,7 @@ __all__ = [
     "ResultWriteError",
     "RunOptions",
     "ScenariosFailed",
+    "SceneFailure",
     "VlmScene",
     "WorkerDied",
     "WorkerTimeout",
@@ -205,8 +206,9 @@ async def evaluate_async(
         failed.append((job, exc))
         scene_dir = out / "scenes" / job.key
         scene_dir.mkdir(parents=True, exist_ok=True)
-        write_json_atomic(scene_dir / "error.json", error_report(job, exc))
-        append_line(out / "results.jsonl", failure_line(job, opts, exc, wall))
+        failure = SceneFailure.of(exc)
+        write_json_atomic(scene_dir / "error.json", failure.report(job))
+        append_line(out / "results.jsonl", failure.line(job, opts, wall))
         log(f"[{index[job.key]}/{len(jobs)}] {job.key}: FAILED, system_error ({type(exc).__name__}: {exc})")
         progress.fail()
 
