@@ -3,9 +3,11 @@ the scene or its agent): the failure line the results log records for it (the pr
 `system_error` termination, not scored) and the `error.json` report in its folder.
 
 An agent that raises is treated like any other scene fault: the scenario is recorded as failed
-and redone on resume; the batch goes on. (An agent cannot hurt the score by raising: the failed
-scenario is not scored, and the run exits non-zero until it is redone.) Model-server faults are
-not scene faults: a failed request holds the previous control and is counted (`vlm_drive.py`)."""
+and redone on resume; the batch goes on. (An agent cannot dodge a bad scenario by raising: the
+run exits non-zero and its summary lists the scenario until a rerun scores it.) A `ConfigError`
+is not a scene fault: the run's configuration is wrong and the run stops. Model-server faults are
+not scene faults either: a failed request holds the previous control and is counted
+(`vlm_drive.py`)."""
 
 from __future__ import annotations
 
