@@ -5,6 +5,9 @@ pub mod json_schema;
 pub mod parse;
 pub mod resolve;
 pub mod schema;
+pub mod schema_rules;
+pub mod sumo_routes;
+pub mod tables;
 pub mod traffic;
 
 pub use json_schema::{scenario_json_schema, scenario_json_schema_string};
@@ -78,7 +81,7 @@ impl Summary {
             actors: s.actors.len() - obstacles,
             obstacles,
             signs: s.signs.len(),
-            traffic_lights: crate::world::lights::signal_heads(&s.map).len(),
+            traffic_lights: crate::map::signal_heads(&s.map).len(),
             traffic: traffic_summary(&s.traffic),
         }
     }

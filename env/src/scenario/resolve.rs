@@ -2,10 +2,11 @@
 //! geometry against the map, with errors naming file, TOML field and value.
 
 use super::schema::*;
+pub use super::tables::{default_size, vclass_of};
 use crate::geom::{Polyline, Pose, Vec2};
 use crate::map::{EdgeFunction, EdgeIdx, LaneIdx, Network, VClass};
+use crate::vehicle_params::VehicleParams;
 use crate::view::{ActorKind, SignView};
-use crate::world::VehicleParams;
 use crate::{Error, Result};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -17,21 +18,6 @@ pub const DEFAULT_REFERENCE_SPEED_MPS: f64 = 5.56;
 pub const SNAP_DISTANCE_M: f64 = 6.0;
 /// Map-path prefix resolved against `SUMO_HOME`.
 pub const SUMO_PREFIX: &str = "sumo:";
-
-/// Default (length, width, height) in metres of each actor kind.
-pub fn default_size(kind: ActorKind) -> (f64, f64, f64) {
-    match kind {
-        ActorKind::Car => (4.5, 1.9, 1.5),
-        ActorKind::Bus => (12.0, 2.55, 3.2),
-        ActorKind::Truck => (8.0, 2.5, 3.5),
-        ActorKind::Motorcycle => (2.2, 0.8, 1.5),
-        ActorKind::Cyclist => (1.8, 0.6, 1.7),
-        ActorKind::Pedestrian => (0.5, 0.5, 1.75),
-        ActorKind::Cone => (0.4, 0.4, 0.7),
-        ActorKind::Barrier => (2.0, 0.5, 1.0),
-        ActorKind::StaticObject => (1.0, 1.0, 1.0),
-    }
-}
 
 /// Default cruise speed of a scripted actor, m/s.
 pub fn default_speed_mps(kind: ActorKind) -> f64 {
@@ -61,18 +47,6 @@ fn default_color(kind: ActorKind, i: usize) -> [u8; 3] {
         ActorKind::Cone => [255, 120, 0],
         ActorKind::Barrier => [230, 60, 40],
         _ => PALETTE[i % PALETTE.len()],
-    }
-}
-
-/// SUMO vehicle class used to route an actor of this kind.
-pub fn vclass_of(kind: ActorKind) -> VClass {
-    match kind {
-        ActorKind::Bus => VClass::Bus,
-        ActorKind::Truck => VClass::Truck,
-        ActorKind::Motorcycle => VClass::Motorcycle,
-        ActorKind::Cyclist => VClass::Bicycle,
-        ActorKind::Pedestrian => VClass::Pedestrian,
-        _ => VClass::Passenger,
     }
 }
 
