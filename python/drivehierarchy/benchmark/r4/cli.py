@@ -18,7 +18,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
     def common(p: argparse.ArgumentParser) -> None:
         names = ", ".join([*runner.AGENTS.names(), runner.VLM_AGENT])
-        p.add_argument("--agent", default="expert", help=f"agent name ({names})")
+        p.add_argument(
+            "--agent",
+            default="expert",
+            help=f"agent name ({names}). sb3:PATH loads a Stable-Baselines3 archive, which unpickles "
+            "Python objects and so can run arbitrary code: only load model files you trust",
+        )
         p.add_argument("--out", type=Path, required=True, help="output directory (resumable)")
         p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
         p.add_argument("--frames", action="store_true", help="save front and BEV PNGs of every decision")
@@ -57,6 +62,15 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     ev.add_argument("--jobs", type=int, default=1, help="scenarios in flight at once (default 1)")
     ev.add_argument("--seeds", type=int, default=1, help="run every scenario with K seeds (default 1)")
     ev.add_argument("--ray", metavar="ADDRESS", help="run scenarios as Ray tasks ('local' starts one)")
+    ev.add_argument(
+        "--worker-timeout",
+        type=float,
+        default=600.0,
+        metavar="S",
+        help="kill a SUMO worker process that does not answer a call within S seconds; its scenario "
+        "fails, the others go on (default 600; 0: no limit). For a non-VLM agent one call is the "
+        "whole scenario",
+    )
     common(ev)
     ev.set_defaults(func=_evaluate)
 
@@ -117,7 +131,14 @@ def _opts(args: argparse.Namespace) -> runner.RunOptions:
         vlm=_vlm_options(args),
         ray_address=getattr(args, "ray", None),
         progress=args.progress or sys.stderr.isatty(),
+        worker_timeout_s=_worker_timeout(getattr(args, "worker_timeout", 600.0)),
     )
+
+
+def _worker_timeout(value: float) -> float | None:
+    if value < 0:
+        raise ConfigError(f"--worker-timeout = {value!r}: expected ≥ 0 seconds (0: no limit)")
+    return value or None
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -127,6 +148,9 @@ def _run(args: argparse.Namespace) -> int:
     except runner.BatchAborted as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 3
+    except runner.ScenariosFailed as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 4
     print(json.dumps(results[0]["score"], indent=2, sort_keys=True))
     return 0
 
@@ -139,6 +163,13 @@ def _evaluate(args: argparse.Namespace) -> int:
     except runner.BatchAborted as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 3
+    except runner.ScenariosFailed as exc:
+        summary = args.out / "summary.md"
+        if summary.exists():  # the scenarios that finished
+            print()
+            print(summary.read_text(encoding="utf-8"))
+        print(f"error: {len(exc.failed)} scenario(s) failed: {', '.join(exc.failed)}: {exc}", file=sys.stderr)
+        return 4
     print()
     print(runner.summary_table(results))
     return 0
