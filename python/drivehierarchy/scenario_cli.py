@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import tomllib
 from pathlib import Path
 from typing import Any
-
-import tomllib
 
 from drivehierarchy import DriveHierarchyError, _core
 from drivehierarchy._core import ConfigError
