@@ -44,7 +44,7 @@ def resolve_scenario(scenario: str | Path | None) -> str:
     ids = [scenario_id(q) for q in builtin_scenarios()]
     raise ScenarioError(
         f"scenario `{scenario}`: not a file and not a built-in scenario id"
-        f"{did_you_mean(str(scenario), ids)} (`drivehierarchy scenario list` shows the {len(ids)} built-in ids)"
+        f"{did_you_mean(str(scenario), ids)} (`drivehierarchy scenario list` shows all {len(ids)})"
     )
 
 
