@@ -27,9 +27,10 @@ fi
 VPY=.venv/bin/python
 "$VPY" -m pip install --quiet --upgrade "pip>=23" "maturin>=1.7,<2"
 
-# The native SUMO backend's shim is compiled against the C++ headers of the pinned eclipse-sumo
-# wheel (python/build.rs): install that first and point the build at it via SUMO_HOME.
-sumo_pin="$(grep -o '"eclipse-sumo==[^"]*"' pyproject.toml | tr -d '"')"
+# SUMO's native libraries come with the pinned eclipse-sumo wheel; it is installed first so that
+# their system libraries can be checked below. (The build itself gets SUMO's C++ headers from the
+# same pin, a build requirement in pyproject.toml: no SUMO_HOME is needed.)
+sumo_pin="$(grep -o '"eclipse-sumo==[^"]*"' pyproject.toml | head -1 | tr -d '"')"
 "$VPY" -m pip install --quiet "$sumo_pin"
 SUMO_HOME="$("$VPY" -c 'import sumo; print(sumo.SUMO_HOME)')"
 
@@ -52,5 +53,5 @@ if [ -n "$missing" ]; then
 fi
 spec="."
 [ -n "$extras" ] && spec=".[$extras]"
-SUMO_HOME="$SUMO_HOME" "$VPY" -m pip install --quiet -e "$spec"
+env -u SUMO_HOME "$VPY" -m pip install --quiet -e "$spec"
 echo "install: drivehierarchy${extras:+[$extras]} installed in .venv ($(du -sh .venv | cut -f1)); activate with: source .venv/bin/activate"

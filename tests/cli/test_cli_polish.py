@@ -3,6 +3,7 @@ changed scenario files, and no output left behind by a command that failed befor
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -99,3 +100,34 @@ def test_a_changed_scenario_file_is_noticed_and_force_redoes_it(capsys, tmp_path
 def test_listing_commands_still_print(argv: list[str], capsys) -> None:
     assert main(argv) == 0
     assert capsys.readouterr().out.strip()
+
+
+def test_map_show_lists_edges_and_lanes_of_a_shipped_map(capsys) -> None:
+    assert main(["map", "show", "builtin:town01", "--edge", "C2T"]) == 0
+    out = capsys.readouterr().out
+    assert "edge C2T:" in out
+    lanes = [x.split() for x in out.splitlines() if x.strip().startswith("lane ")]
+    assert [x[1] for x in lanes] == ["C2T_0", "C2T_1", "C2T_2"]
+    assert all(float(x[2]) > 100 for x in lanes)  # lengths in metres
+    assert main(["map", "show", "builtin:town01", "--json"]) == 0
+    net = json.loads(capsys.readouterr().out)
+    lane = next(la for e in net["edges"] for la in e["lanes"] if la["id"] == "C2T_1")
+    assert "passenger" in lane["allow"] and lane["length_m"] > 100
+    assert main(["map", "show", "builtin:town01", "--edge", "C2X"]) == 2
+    assert "did you mean" in capsys.readouterr().err
+
+
+def test_a_scenario_anywhere_names_a_shipped_map_as_builtin(capsys, tmp_path: Path) -> None:
+    text = (builtin_root() / "r4" / f"{SHORT}.toml").read_text(encoding="utf-8")
+    lines = [('map = "builtin:town01"' if x.startswith("map = ") else x) for x in text.splitlines()]
+    scenario = tmp_path / "elsewhere" / "mine.toml"
+    scenario.parent.mkdir()
+    scenario.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    assert main(["scenario", "validate", str(scenario)]) == 0
+    capsys.readouterr()
+    assert main(["r4", "run", "--scenario", str(scenario), "--out", str(tmp_path / "o")]) == 0
+    assert "destination_reached" in capsys.readouterr().out
+    scenario.write_text(scenario.read_text(encoding="utf-8").replace("builtin:town01", "builtin:town9"))
+    assert main(["scenario", "validate", str(scenario)]) == 1
+    out = capsys.readouterr().out
+    assert "builtin:town9" in out and "shipped: bs3d_arterial, town01, town02" in out
