@@ -12,7 +12,7 @@ echo "== cargo clippy"; cargo clippy --workspace --all-targets --locked -- -D wa
 echo "== ruff";         $PY -m ruff check .
                         $PY -m ruff format --check .
 echo "== stubtest";     $PY -m mypy.stubtest drivehierarchy._core --allowlist python/stubtest-allowlist.txt
-echo "== docs";         $PY -m mkdocs build --strict --quiet --site-dir "$(mktemp -d)"
+echo "== docs";         DISABLE_MKDOCS_2_WARNING=true NO_MKDOCS_2_WARNING=1 $PY -m mkdocs build --strict --quiet --site-dir "$(mktemp -d)"
 echo "== wheel";        bash scripts/wheel_check.sh
 echo "== cargo test";   cargo test --workspace --exclude dh-py --locked
 echo "== pytest";       $PY -m pytest tests "$@"

@@ -78,7 +78,7 @@ def env_page() -> str:
         "",
         "## `DriveHierarchy-R4`",
         "",
-        textwrap.dedent(DriveHierarchyR4Env.__doc__ or "").strip(),
+        inspect.cleandoc(DriveHierarchyR4Env.__doc__ or ""),
         "",
         "## Spaces (default configuration)",
         "",
@@ -102,13 +102,13 @@ def env_page() -> str:
     ]
     parts += [f"| {i} | `{name}` |" for i, name in enumerate(STATE_FIELDS)]
     rust = json.loads(_core.default_sim_config())
-    parts += ["", "## `R4Config`", "", textwrap.dedent(config_mod.R4Config.__doc__ or "").strip(), ""]
+    parts += ["", "## `R4Config`", "", inspect.cleandoc(config_mod.R4Config.__doc__ or ""), ""]
     parts += [config_table(config_mod.R4Config), ""]
     for cls in (config_mod.CameraConfig, config_mod.BevConfig):
         parts += [
             f"### `{cls.__name__}`",
             "",
-            textwrap.dedent(cls.__doc__ or "").strip(),
+            inspect.cleandoc(cls.__doc__ or ""),
             "",
             config_table(cls),
             "",

@@ -84,7 +84,7 @@ def test_a_changed_scenario_file_is_noticed_and_force_redoes_it(capsys, tmp_path
     assert main(args) == 0
     first = capsys.readouterr().out
     assert main(args) == 0  # unchanged: resumed, not redone
-    assert "done before (scenario unchanged)" in capsys.readouterr().err
+    assert "done before, skipped (scenario unchanged" in capsys.readouterr().err
     with scenario.open("a", encoding="utf-8") as fh:  # any edit changes its hash
         fh.write("\n# edited\n")
     assert main(args) == 2

@@ -14,12 +14,14 @@ from drivehierarchy.cli import build_parser
 
 ROOT = Path(__file__).resolve().parents[2]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
-_BLOCK = re.compile(r"```(?:bash|sh|console)?\n(.*?)```", re.S)
+_BLOCK = re.compile(r"^```([\w+-]*)\n(.*?)^```", re.S | re.M)
 
 
 def _commands(page: Path) -> list[str]:
     out = []
-    for block in _BLOCK.findall(page.read_text(encoding="utf-8")):
+    for lang, block in _BLOCK.findall(page.read_text(encoding="utf-8")):
+        if lang not in ("", "bash", "sh", "console", "text"):
+            continue
         text = block.replace("\\\n", " ")
         for line in text.splitlines():
             line = line.split(" #", 1)[0].strip()

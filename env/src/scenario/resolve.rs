@@ -426,7 +426,12 @@ fn resolve_builtin_map(file: &Path, map: &str, name: &str) -> Result<PathBuf> {
         })
         .unwrap_or_default();
     shipped.sort();
-    Err(Error::scenario(file, "map", map, format!("no shipped map of this name (shipped: {})", shipped.join(", "))))
+    Err(Error::scenario(
+        file,
+        "map",
+        map,
+        format!("no shipped map of this name (shipped: {})", shipped.join(", ")),
+    ))
 }
 
 /// Resolves the `map` value of a scenario file to a path.

@@ -178,7 +178,7 @@ async def evaluate_async(
     for job in jobs:
         if job.key in done:
             i = index[job.key]
-            log(f"[{i}/{len(jobs)}] {job.key}: done before (scenario unchanged), skipped; --force redoes it")
+            log(f"[{i}/{len(jobs)}] {job.key}: done before, skipped (scenario unchanged; --force redoes it)")
         else:
             todo.append(job)
     if opts.jobs > 1:
