@@ -86,7 +86,7 @@ def test_cli_run_writes_frames(tmp_path: Path) -> None:
     out = tmp_path / "one"
     proc = subprocess.run(
         [sys.executable, "-m", "drivehierarchy.cli", "r4", "run", "--agent", "expert",
-         "--scenario", "01_pedestrian/town01_01_midblock_crossing", "--out", str(out), "--frames"],
+         "--scenario", "01_pedestrian/town01_01_midblock_crossing", "--out", str(out), "--frames", "--json"],
         capture_output=True, text=True, timeout=300, check=False,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr

@@ -21,7 +21,8 @@ pub struct ScenarioFile {
     pub category: String,
     #[serde(default)]
     pub description: String,
-    /// Path relative to the scenario file, or `sumo:<path under SUMO_HOME>`.
+    /// Path relative to the scenario file, `sumo:<path under SUMO_HOME>`, or `builtin:<name>`
+    /// for a map shipped with the package (`builtin:town01`, `builtin:town02`, ...).
     pub map: String,
     /// T_ref: the ego's reference duration (efficiency term only).
     #[serde(default)]

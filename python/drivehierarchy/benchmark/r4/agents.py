@@ -35,12 +35,16 @@ class AgentRegistry:
         try:
             return self._factories[name]()
         except KeyError:
+            from drivehierarchy._suggest import did_you_mean
+
+            known = [*sorted(self._factories), VLM_AGENT]
             raise ConfigError(
-                f"config `agent` = {name!r}: unknown agent (known: {', '.join(sorted(self._factories))})"
+                f"config `agent` = {name!r}: unknown agent{did_you_mean(name, known)} (known: "
+                f"{', '.join([*known, *(f'{p}:PATH' for p in sorted(self._prefixes))])})"
             ) from None
 
     def names(self) -> list[str]:
-        return sorted(self._factories) + [f"{p}:..." for p in sorted(self._prefixes)]
+        return sorted(self._factories) + [f"{p}:PATH" for p in sorted(self._prefixes)]
 
 
 AGENTS = AgentRegistry()

@@ -29,6 +29,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         p.add_argument("--frames", action="store_true", help="save front and BEV PNGs of every decision")
         p.add_argument("--video", action="store_true", help="save an animated GIF of the front camera")
         p.add_argument("--progress", action="store_true", help="progress bar on stderr (default: on a TTY)")
+        p.add_argument(
+            "--force",
+            action="store_true",
+            help="redo scenarios that --out already has results for (needed when a scenario file changed)",
+        )
         v = p.add_argument_group("VLM agent (--agent vlm; docs/vlm.md)")
         v.add_argument("--base-url", help="OpenAI-compatible server, e.g. http://localhost:8000/v1")
         v.add_argument("--model", help="served model id, or a preset key (drivehierarchy r4 models)")
@@ -54,6 +59,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
     run = cmds.add_parser("run", help="drive one scenario")
     run.add_argument("--scenario", required=True, help="scenario file or built-in id")
+    run.add_argument("--json", action="store_true", help="print the scene score record as JSON")
     common(run)
     run.set_defaults(func=_run)
 
@@ -132,6 +138,7 @@ def _opts(args: argparse.Namespace) -> runner.RunOptions:
         ray_address=getattr(args, "ray", None),
         progress=args.progress or sys.stderr.isatty(),
         worker_timeout_s=_worker_timeout(getattr(args, "worker_timeout", 600.0)),
+        force=args.force,
     )
 
 
@@ -151,7 +158,26 @@ def _run(args: argparse.Namespace) -> int:
     except runner.ScenariosFailed as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 4
-    print(json.dumps(results[0]["score"], indent=2, sort_keys=True))
+    result = results[0]
+    s = result["score"]
+    if args.json:
+        print(json.dumps(s, indent=2, sort_keys=True))
+        return 0
+    scene = args.out / "scenes" / result["key"]
+    print(
+        f"{result['key']}: S_R4 {s['score_composed']:.2f} ({s['status']}, {s['termination_reason']}); "
+        f"route {s['score_route']:.3f}, safety {s['score_safety']:.3f}, "
+        f"efficiency {s['score_efficiency']:.3f}"
+    )
+    artifacts = [("score record", scene / "scene_score.json"), ("episode log", scene / "episode_log.jsonl")]
+    artifacts += [("decisions", scene / "decisions.jsonl"), ("events", scene / "events.json")]
+    if args.frames:
+        artifacts.append(("frames", scene / "frames"))
+    if args.video:
+        artifacts.append(("video", scene / "episode.gif"))
+    for what, path in artifacts:
+        if path.exists():
+            print(f"  {what + ':':<14}{path}")
     return 0
 
 

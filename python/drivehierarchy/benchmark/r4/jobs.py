@@ -41,6 +41,9 @@ class RunOptions:
     # is killed (its scenario fails, the others go on); None: no limit. For a registry agent one
     # call drives the whole scenario; for the VLM agent, one env step or message.
     worker_timeout_s: float | None = 600.0
+    # Redo every requested scenario even if `results.jsonl` has it (a changed scenario file is
+    # refused without it).
+    force: bool = False
 
     def seed_list(self) -> list[int]:
         if self.seeds < 1:
@@ -84,6 +87,13 @@ def suite_scenarios(suite: str) -> list[Path]:
     root = Path(suite)
     if root.is_file():
         return [root]
+    if not root.exists():
+        from drivehierarchy._suggest import did_you_mean
+
+        hint = did_you_mean(suite, ["builtin"]) if "/" not in suite else ""
+        raise ConfigError(f"config `suite` = {suite!r}: {root} does not exist{hint}")
+    if not root.is_dir():
+        raise ConfigError(f"config `suite` = {suite!r}: {root} is neither a folder nor a scenario file")
     found = sorted(root.glob("*/*.toml")) + sorted(root.glob("*.toml"))
     if not found:
         raise ConfigError(f"config `suite` = {suite!r}: no scenario files (*.toml) found under {root}")

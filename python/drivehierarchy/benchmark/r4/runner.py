@@ -81,6 +81,7 @@ from drivehierarchy.benchmark.r4.jobs import (
 from drivehierarchy.benchmark.r4.store import (
     ResultWriteError,
     append_line,
+    changed_scenarios,
     check_manifest,
     read_failures,
     read_results,
@@ -152,7 +153,14 @@ async def evaluate_async(
     # Every scenario is loaded (a bad file fails here, before anything is written) and its traffic
     # resolved as the env will run it.
     sumo = frozenset(p for p in {j.scenario for j in jobs} if uses_sumo(p, opts.config))
-    check_manifest(out, opts)  # a directory of another run is refused before any request
+    old_manifest = check_manifest(out, opts)  # a directory of another run is refused before any request
+    done = read_results(out) if out.is_dir() and not opts.force else {}
+    changed = changed_scenarios(old_manifest, jobs, done)
+    if changed:
+        raise ConfigError(
+            f"{out / 'manifest.json'}: field `scenarios` = {changed!r}: scenario file(s) changed since "
+            "they were run here; add --force to redo them (or use a new --out)"
+        )
     driver = None
     if is_vlm:
         from drivehierarchy.agents.vlm.agent import VLMDriver
@@ -165,12 +173,12 @@ async def evaluate_async(
             raise
     out.mkdir(parents=True, exist_ok=True)
     write_manifest(out, jobs, opts)
-    done = read_results(out)
     index = {j.key: i for i, j in enumerate(jobs, 1)}
     todo = []
     for job in jobs:
         if job.key in done:
-            log(f"[{index[job.key]}/{len(jobs)}] {job.key}: done before, skipped")
+            i = index[job.key]
+            log(f"[{i}/{len(jobs)}] {job.key}: done before, skipped (scenario unchanged; --force redoes it)")
         else:
             todo.append(job)
     if opts.jobs > 1:

@@ -113,7 +113,7 @@ def write_text_atomic(path: Path, text: str) -> None:
         ) from exc
 
 
-def _sha256(path: Path) -> str:
+def sha256_of(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
@@ -130,7 +130,7 @@ def write_manifest(out: Path, jobs: list[Job], opts: RunOptions) -> None:
         "ray_address": opts.ray_address,
         "config": json.loads(opts.config.to_json()),
         "scenarios": {
-            j.key: {"path": str(j.scenario), "sha256": _sha256(j.scenario), "seed": j.seed} for j in jobs
+            j.key: {"path": str(j.scenario), "sha256": sha256_of(j.scenario), "seed": j.seed} for j in jobs
         },
         "python": sys.version.split()[0],
         "started_unix": time.time(),
@@ -138,6 +138,8 @@ def write_manifest(out: Path, jobs: list[Job], opts: RunOptions) -> None:
     path = out / "manifest.json"
     old = check_manifest(out, opts)
     if old is not None:
+        # Scenarios of earlier invocations into this directory keep their entries.
+        manifest["scenarios"] = {**old.get("scenarios", {}), **manifest["scenarios"]}
         manifest["started_unix"] = old.get("started_unix", manifest["started_unix"])
         manifest["resumed_unix"] = time.time()
     write_json_atomic(path, manifest)
@@ -159,6 +161,18 @@ def check_manifest(out: Path, opts: RunOptions) -> dict[str, Any] | None:
             f"directory belongs to another run (asked: {[b.get(k) for k in diff]!r}); use a new --out"
         )
     return old
+
+
+def changed_scenarios(old: dict[str, Any] | None, jobs: list[Job], done: dict[str, Any]) -> list[str]:
+    """Keys of finished jobs whose scenario file no longer has the hash the manifest recorded."""
+    if old is None:
+        return []
+    recorded = old.get("scenarios", {})
+    return [
+        j.key
+        for j in jobs
+        if j.key in done and j.key in recorded and recorded[j.key].get("sha256") != sha256_of(j.scenario)
+    ]
 
 
 def _flatten(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:

@@ -128,6 +128,8 @@ def summary_table(results: list[dict[str, Any]], summary: dict[str, Any] | None 
 
 def rescore_dir(out: Path) -> list[dict[str, Any]]:
     """Recomputes every scene score of a run from its episode logs, without simulating."""
+    if not out.exists():
+        raise ConfigError(f"{out}: does not exist (expected an `r4 evaluate` or `r4 run` output directory)")
     scenes = sorted((out / "scenes").glob("*/episode_log.jsonl"))
     if not scenes:
         single = out / "episode_log.jsonl"
