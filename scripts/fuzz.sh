@@ -13,7 +13,7 @@ root=$PWD
 
 secs=${1:-15}
 shift || true
-all=(scenario_toml net_xml vlm_reply run_log openloop_answer openloop_predictions)
+all=(scenario_toml scenario_world net_xml vlm_reply run_log openloop_answer openloop_predictions)
 targets=("$@")
 [ ${#targets[@]} -gt 0 ] || targets=("${all[@]}")
 
@@ -32,7 +32,7 @@ unset CARGO_TARGET_DIR
 # Seeds: the project's real inputs (never the original release's data).
 seeds() {
     case $1 in
-        scenario_toml) find -L scenarios env/tests/world_fixtures -name '*.toml' ;;
+        scenario_toml | scenario_world) find -L scenarios env/tests/world_fixtures -name '*.toml' ;;
         net_xml) find -L scenarios/maps env/tests/world_fixtures -name '*.net.xml' ;;
         *) find fuzz/seeds/"$1" -type f ;;
     esac
@@ -40,6 +40,7 @@ seeds() {
 dict() {
     case $1 in
         openloop_answer | openloop_predictions) echo fuzz/dicts/openloop.dict ;;
+        scenario_world) echo fuzz/dicts/scenario_toml.dict ;;
         *) echo fuzz/dicts/"$1".dict ;;
     esac
 }
