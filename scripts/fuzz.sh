@@ -59,7 +59,7 @@ for t in "${targets[@]}"; do
     rc=0
     (cd fuzz && cargo +nightly fuzz run -s none "$t" "$root/$corpus" -- -max_total_time="$secs" \
         -timeout=30 -dict="$root/$(dict "$t")" -print_final_stats=1) >"$log" 2>&1 || rc=$?
-    grep -E '^(#[0-9]+ +DONE|stat::number_of_executed_units|stat::peak_rss_mb)' "$log" || true
+    grep -E '^(#[0-9]+[[:space:]]+DONE|stat::number_of_executed_units)' "$log" || true
     if [ "$rc" != 0 ]; then
         tail -n 40 "$log"
         failed+=("$t")
