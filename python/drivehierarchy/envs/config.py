@@ -65,7 +65,8 @@ class R4Config:
     def __post_init__(self) -> None:
         if self.sumo_backend not in ("auto", "native", "python", "traci"):
             raise ConfigError(
-                f"config `sumo_backend` = {self.sumo_backend!r}: expected 'auto', 'native', 'python' or 'traci'"
+                f"config `sumo_backend` = {self.sumo_backend!r}: "
+                "expected 'auto', 'native', 'python' or 'traci'"
             )
         if self.traffic not in (None, "sumo", "native", "none"):
             raise ConfigError(
