@@ -1,14 +1,15 @@
 """Speed of the live background traffic, side by side with libsumo alone.
 
-    python scripts/bench_sumo.py [--scenario PATH] [--ticks N] [--seed S]
+    python scripts/bench_sumo.py [--scenario PATH] [--ticks N] [--seed S] [--backends native,python,traci]
 
 On one core (the process and its workers are pinned to one CPU), no images, on the same net and
 vehicles; each measurement runs in a fresh worker process (one SUMO copy per process):
 
-1. co-simulation, once per SUMO backend ("native": libsumo's C++ API driven from Rust, no Python
-   per tick; "python": the libsumo module): `DriveHierarchy-R4` in SUMO mode driven by the
-   expert; only `env.step` is timed (the expert's own time is not); the ego's pose of every
-   decision is recorded;
+1. co-simulation, once per SUMO backend ("native": libsumo's C++ API through the shim, no Python
+   per tick; "python": the libsumo module; "traci", only when asked: SUMO as a subprocess, whose
+   own CPU time the thread clock does not see, so time it with `--clock wall`):
+   `DriveHierarchy-R4` in SUMO mode driven by the expert; only `env.step` is timed (the expert's
+   own time is not); the ego's pose of every decision is recorded;
 2. libsumo alone: the same route file and seed, the ego replayed from (1) with `moveToXY`;
    `simulationStep()` alone is timed (SUMO's own step time), and separately the ego's
    `moveToXY` and the reading of the same vehicle subscriptions the Python backend uses;
@@ -51,9 +52,8 @@ def run_env(scenario: Path, ticks: int, seed: int, traffic: str, backend: str = 
     )
     if traffic == "sumo":
         # The backend must be the one asked for (no silent fallback in a benchmark).
-        from drivehierarchy import _core
-
-        assert isinstance(env._sumo, _core.NativeSumo) == (backend == "native"), (backend, env._sumo)
+        transport = {"native": "libsumo", "python": "libsumo-python", "traci": "traci"}[backend]
+        assert env._sumo is not None and env._sumo.transport == transport, (backend, env._sumo)
     per = env.config.decision_interval_ticks
     spent, done, vehicles, episodes = 0.0, 0, [], 0
     ego_track: list[tuple[float, float, float]] = []
@@ -199,20 +199,23 @@ def main() -> None:
     ap.add_argument("--ticks", type=int, default=4000)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--skip-native", action="store_true", help="skip the native reactive mode")
+    ap.add_argument("--backends", default="native,python", help="SUMO backends to time (native,python,traci)")
     ap.add_argument("--repeats", type=int, default=3, help="runs per measurement (the fastest counts)")
     ap.add_argument("--clock", choices=("cpu", "wall"), default="cpu", help="thread CPU time or wall time")
     args = ap.parse_args()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     iso = functools.partial(_isolated, args.clock, args.repeats)
-    cosims = {b: iso(run_env, args.scenario, args.ticks, args.seed, "sumo", b) for b in ("native", "python")}
+    backends = [b.strip() for b in args.backends.split(",") if b.strip()]
+    if "native" not in backends:
+        ap.error("--backends: 'native' is needed (its ego track drives libsumo alone)")
+    cosims = {b: iso(run_env, args.scenario, args.ticks, args.seed, "sumo", b) for b in backends}
     alone = iso(run_sumo_alone, args.scenario, args.seed, cosims["native"]["ego_track"])
     world = iso(run_env, args.scenario, args.ticks, args.seed, "none")
     native = None if args.skip_native else iso(run_env, args.scenario, args.ticks, args.seed, "native")
     rows = [
         ("libsumo alone (simulationStep)", alone),
-        ("co-simulation, native SUMO backend", cosims["native"]),
-        ("co-simulation, python SUMO backend", cosims["python"]),
+        *((f"co-simulation, {b} SUMO backend", cosims[b]) for b in backends),
         ("world alone (traffic none)", world),
     ]
     if native is not None:
@@ -231,7 +234,7 @@ def main() -> None:
         f"results into Python {alone['read_us']:.1f} µs ({100 * alone['read_us'] / step:.1f} %)"
     )
     print("sync overhead = co-sim tick − SUMO step − world-alone tick (target ≤ 25 % of SUMO's step):")
-    for b in ("native", "python"):
+    for b in backends:
         c = cosims[b]
         overhead = c["tick_us"] - step - world["tick_us"]
         print(

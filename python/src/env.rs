@@ -3,8 +3,7 @@
 
 use crate::errors::to_pyerr;
 use crate::json::to_py;
-use crate::sumo_native::{NativeSumoBridge, PyNativeSumo};
-use crate::traffic::SumoBridge;
+use crate::sumo_native::PySumoSession;
 use dh_agents::expert::{Expert, ExpertParams};
 use dh_env::drive::{ActuationBridge, Control, Decision, DecisionFailure};
 use dh_env::render::{BevConfig, CameraConfig, GifWriter, Image};
@@ -249,25 +248,26 @@ impl PySim {
     }
 
     /// Background traffic from the next `reset` on: `"none"`, `"native"` (the Rust IDM model),
-    /// or `"sumo"` with `sumo` = the object owning SUMO: `NativeSumo` (libsumo's C++ API, driven
-    /// from Rust) or the Python backend (`envs.traffic.SumoTraffic`).
+    /// or `"sumo"` with `sumo` = the `SumoSession` to run SUMO on (`envs.traffic.native`).
     #[pyo3(signature = (mode, sumo=None))]
     fn set_traffic(&mut self, py: Python<'_>, mode: &str, sumo: Option<Py<PyAny>>) -> PyResult<()> {
-        let model: Option<Box<dyn dh_env::world::TrafficModel>> = match (mode, sumo) {
-            ("none", None) => None,
-            ("native", None) => Some(Box::new(
+        let session = match (mode, &sumo) {
+            ("sumo", Some(obj)) => {
+                obj.bind(py).cast::<PySumoSession>().ok().map(|s| s.borrow().session.clone())
+            }
+            _ => None,
+        };
+        let model: Option<Box<dyn dh_env::world::TrafficModel>> = match (mode, sumo, session) {
+            ("none", None, _) => None,
+            ("native", None, _) => Some(Box::new(
                 dh_env::world::idm::IdmTraffic::new(self.inner.scenario()).map_err(|e| err(py, e))?,
             )),
-            ("sumo", Some(obj)) => match obj.bind(py).cast::<PyNativeSumo>() {
-                Ok(native) => {
-                    let session = native.borrow().session.clone();
-                    Some(Box::new(NativeSumoBridge::new(session, self.inner.scenario())))
-                }
-                Err(_) => Some(Box::new(SumoBridge::new(obj, self.inner.scenario()))),
-            },
-            (m, s) => {
+            ("sumo", Some(_), Some(session)) => {
+                Some(Box::new(dh_env::world::sumo::SumoCoSim::new(session, self.inner.scenario())))
+            }
+            (m, s, _) => {
                 let why = match m {
-                    "sumo" => "mode 'sumo' needs the SumoTraffic object",
+                    "sumo" => "mode 'sumo' needs a SumoSession",
                     "none" | "native" => "only mode 'sumo' takes a SUMO object",
                     _ => "expected 'sumo', 'native' or 'none'",
                 };
@@ -506,8 +506,9 @@ pub fn map_summary(py: Python<'_>, map: &str, sumo_home: Option<PathBuf>) -> PyR
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PySim>()?;
     m.add_class::<PyGifWriter>()?;
-    m.add_class::<PyNativeSumo>()?;
-    m.add("NATIVE_SUMO_SHIM", crate::sumo_native::SHIM_FILE)?;
+    m.add_class::<PySumoSession>()?;
+    m.add("NATIVE_SUMO_SHIM", dh_env::world::sumo::shim::SHIM_FILE)?;
+    m.add("TRACI_SUMO_SHIM", dh_env::world::sumo::shim::TRACI_SHIM_FILE)?;
     m.add_function(wrap_pyfunction!(rescore, m)?)?;
     m.add_function(wrap_pyfunction!(validate_scenario, m)?)?;
     m.add_function(wrap_pyfunction!(scenario_json_schema, m)?)?;

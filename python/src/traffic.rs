@@ -1,254 +1,268 @@
-//! The SUMO co-simulation seam: what both SUMO backends share ([`SumoSync`], [`Static`]) and the
-//! Python backend's [`TrafficModel`], whose ticks call the Python object that owns libsumo
-//! (`drivehierarchy.envs.traffic.SumoTraffic`). The native backend is `sumo_native.rs`.
-//!
-//! Per tick: one Python call `tick(movers)` with the ego and the mirrored scenario actors (SUMO
-//! front-bumper position, SUMO angle, speed); it moves them in SUMO, steps SUMO once and returns
-//! libsumo's subscription results as they come (`vehicle.getAllSubscriptionResults()`, the
-//! types of vehicles that departed this step, changed light states). They are turned into the
-//! world's [`TrafficFrame`] here, in Rust, so the Python side does no per-vehicle work.
+//! The `libsumo` Python module as a [`SumoTransport`]: the fallback when the C++ shims were not
+//! built. The orchestration (`dh_env::world::sumo`) is the same as for every transport; this file
+//! only carries its calls to the module (`libsumo.vehicle.moveToXY`, `simulationStep`, ...)
+//! and reads the subscription results (`vehicle.getAllSubscriptionResults()`) in Rust, so
+//! Python does no per-vehicle work.
 
-use dh_env::geom::{Pose, Vec2};
-use dh_env::map::VClass;
-use dh_env::scenario::traffic::{kind_of_vclass, mirror_specs, MirrorSpec, TrafficDemand};
-use dh_env::scenario::{LightProgram, ResolvedEgo, ResolvedScenario, PALETTE};
-use dh_env::view::ActorKind;
-use dh_env::world::{TrafficAgent, TrafficFrame, TrafficInput, TrafficModel};
+use dh_env::world::sumo::{Placed, SumoTransport, TypeInfo, VehicleState};
 use dh_env::{Error, Result};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyString, PyTuple};
 use std::collections::HashMap;
-use std::path::PathBuf;
-use std::sync::Arc;
 
 // libsumo variable ids (`libsumo.constants`).
 const VAR_SPEED: i32 = 0x40;
 const VAR_POSITION: i32 = 0x42;
 const VAR_ANGLE: i32 = 0x43;
 const VAR_SIGNALS: i32 = 0x5b;
-const TL_RED_YELLOW_GREEN_STATE: i32 = 0x20;
-/// The ego counts as on its route within this distance of the route line (the route's edges
-/// span a few lanes either side), m.
-const EGO_ON_ROUTE_M: f64 = 5.0;
 
-/// A traffic vehicle's attributes that do not change (read once, when it departs).
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Static {
-    pub key: u64,
-    pub kind: ActorKind,
-    pub length_m: f64,
-    pub width_m: f64,
-    pub height_m: f64,
-    pub color: [u8; 3],
-}
-
-impl Static {
-    /// From SUMO's type attributes; SUMO's default colour (yellow) gets a palette colour.
-    pub fn new(key: u64, length_m: f64, width_m: f64, height_m: f64, vclass: &str, color: &[i64]) -> Static {
-        let kind = kind_of_vclass(VClass::from_sumo(vclass).unwrap_or(VClass::Passenger));
-        let color = if color.len() >= 3 && color != [255, 255, 0, 255] {
-            [color[0].clamp(0, 255) as u8, color[1].clamp(0, 255) as u8, color[2].clamp(0, 255) as u8]
-        } else {
-            PALETTE[key as usize % PALETTE.len()]
-        };
-        Static { key, kind, length_m, width_m, height_m, color }
-    }
-
-    /// The world's agent from SUMO's front-bumper position and SUMO angle (degrees, clockwise
-    /// from north).
-    pub fn agent(&self, x: f64, y: f64, angle: f64, speed: f64, signals: i64) -> TrafficAgent {
-        let yaw = (90.0 - angle).to_radians();
-        let fwd = Vec2::new(yaw.cos(), yaw.sin());
-        let centre = Vec2::new(x, y) - fwd * (0.5 * self.length_m);
-        TrafficAgent {
-            key: self.key,
-            kind: self.kind,
-            length_m: self.length_m,
-            width_m: self.width_m,
-            height_m: self.height_m,
-            color: self.color,
-            pose: Pose::new(centre, dh_env::geom::wrap_angle(yaw)),
-            speed_mps: speed.max(0.0),
-            signals: signals.max(0) as u32,
-        }
-    }
-}
-
-/// One ego/actor placement for SUMO: (id, front x, front y, SUMO angle, speed, moveToXY
-/// keepRoute); id 0 is the ego, others are scenario actor ids.
-pub(crate) type Mover = (u32, f64, f64, f64, f64, u8);
-
-/// What both SUMO backends share: the scenario's side of the co-simulation (net, demand, ego
-/// route, mirrored actors) and the per-tick movers.
+/// The module's functions a tick uses, looked up once.
 #[derive(Debug)]
-pub(crate) struct SumoSync {
-    pub net: PathBuf,
-    pub map: Arc<dh_env::map::Network>,
-    pub demand: TrafficDemand,
-    pub ego: ResolvedEgo,
-    pub mirrors: Vec<MirrorSpec>,
-    pub movers: Vec<Mover>,
-    /// The scenario's `[[lights]]` overrides.
-    pub programs: Vec<LightProgram>,
+struct Fns {
+    move_to_xy: Py<PyAny>,
+    step: Py<PyAny>,
+    departed: Py<PyAny>,
+    results: Py<PyAny>,
+    light_state: Py<PyAny>,
+    traci_exception: Py<PyAny>,
 }
 
-impl SumoSync {
-    pub fn new(scenario: &ResolvedScenario) -> SumoSync {
-        SumoSync {
-            net: scenario.map_path.clone(),
-            map: scenario.map.clone(),
-            demand: scenario.traffic.clone(),
-            ego: scenario.ego.clone(),
-            mirrors: mirror_specs(&scenario.actors),
-            movers: Vec::new(),
-            programs: scenario.lights.clone(),
-        }
-    }
-
-    /// For each light, the phase and its remaining time that its program (the map's, or the
-    /// scenario's `[[lights]]` override) has at episode t = 0: SUMO runs `warmup_s` before
-    /// t = 0, so its lights are set to this at the end of the warm-up and then show what the
-    /// world's own light model would.
-    pub fn light_sync(&self) -> Vec<(String, usize, f64)> {
-        let mut out = Vec::new();
-        for tl in self.map.tl_ids() {
-            let program = match self.programs.iter().find(|p| p.tl_id == tl) {
-                Some(p) => p.clone(),
-                None => {
-                    let Some(logic) = self.map.tl_logic(tl) else { continue };
-                    LightProgram {
-                        tl_id: tl.to_string(),
-                        offset_s: logic.offset_s,
-                        phases: logic.phases.clone(),
-                        replaced: false,
-                    }
-                }
-            };
-            if let Some((i, left)) = program.phase_at(0.0) {
-                out.push((tl.to_string(), i, left));
-            }
-        }
-        out
-    }
-
-    /// Replacement programs for SUMO (`trafficlight.setProgramLogic`): (light, [(state, s)]).
-    pub fn replaced_programs(&self) -> Vec<(String, Vec<(String, f64)>)> {
-        self.programs
-            .iter()
-            .filter(|p| p.replaced)
-            .map(|p| (p.tl_id.clone(), p.phases.iter().map(|ph| (ph.state.clone(), ph.duration_s)).collect()))
-            .collect()
-    }
-
-    /// The SUMO route file of an episode.
-    pub fn routes_xml(&self, seed: u64) -> String {
-        self.demand.sumo_routes_xml(&self.map, seed, &self.ego, &self.mirrors)
-    }
-
-    /// Movers for SUMO. The ego near its route is mapped onto the route's edges only
-    /// (keepRoute=1, several times cheaper than SUMO's search of the whole net); elsewhere, and
-    /// for the scenario's actors, onto any lane (keepRoute=2).
-    pub fn fill_movers(&mut self, input: &TrafficInput<'_>) {
-        self.movers.clear();
-        let sumo = |id: u32, pose: Pose, length: f64, speed: f64, keep: u8| {
-            let front = pose.pos + pose.forward() * (0.5 * length);
-            (id, front.x, front.y, 90.0 - pose.yaw.to_degrees(), speed, keep)
-        };
-        let e = input.ego;
-        let on_route = self.ego.route.project(e.pose.pos).is_some_and(|p| p.distance <= EGO_ON_ROUTE_M);
-        self.movers.push(sumo(0, e.pose, e.length_m, e.speed_mps, if on_route { 1 } else { 2 }));
-        for a in input.actors {
-            if self.mirrors.binary_search_by_key(&a.id, |m| m.id).is_ok() {
-                self.movers.push(sumo(a.id, a.pose, a.length_m, a.speed_mps, 2));
-            }
-        }
-    }
-}
-
-/// The world side of the SUMO co-simulation through the Python backend.
+/// SUMO through the `libsumo` Python module (in this process: one simulation per process).
 #[derive(Debug)]
-pub struct SumoBridge {
-    obj: Py<PyAny>,
-    sync: SumoSync,
-    vehicles: HashMap<String, Static>,
-    next_key: u64,
-    lights: HashMap<String, String>,
+pub struct PyLibsumoTransport {
+    ls: Py<PyAny>,
+    fns: Fns,
+    tracked: HashMap<String, u64>,
+    light_ids: Vec<String>,
+    open: bool,
 }
 
-impl SumoBridge {
-    pub fn new(obj: Py<PyAny>, scenario: &ResolvedScenario) -> SumoBridge {
-        SumoBridge {
-            obj,
-            sync: SumoSync::new(scenario),
-            vehicles: HashMap::new(),
-            next_key: 0,
-            lights: HashMap::new(),
-        }
+fn err(what: &str, e: PyErr) -> Error {
+    Error::Simulation(format!("SUMO co-simulation: {what}: {e}"))
+}
+
+impl PyLibsumoTransport {
+    /// Over the imported `libsumo` module.
+    pub fn new(py: Python<'_>, ls: Py<PyAny>) -> PyResult<PyLibsumoTransport> {
+        let m = ls.bind(py);
+        let fns = Fns {
+            move_to_xy: m.getattr("vehicle")?.getattr("moveToXY")?.unbind(),
+            step: m.getattr("simulationStep")?.unbind(),
+            departed: m.getattr("simulation")?.getattr("getDepartedIDList")?.unbind(),
+            results: m.getattr("vehicle")?.getattr("getAllSubscriptionResults")?.unbind(),
+            light_state: m.getattr("trafficlight")?.getattr("getRedYellowGreenState")?.unbind(),
+            traci_exception: m.getattr("TraCIException")?.unbind(),
+        };
+        Ok(PyLibsumoTransport { ls, fns, tracked: HashMap::new(), light_ids: Vec::new(), open: false })
     }
 
-    fn read(&mut self, ret: &Bound<'_, PyAny>, out: &mut TrafficFrame) -> PyResult<()> {
-        let tuple = ret.cast::<PyTuple>()?;
-        let veh = tuple.get_item(0)?;
-        let veh = veh.cast::<PyDict>()?;
-        let new = tuple.get_item(1)?;
-        for item in new.cast::<PyList>()?.iter() {
-            let (vid, length_m, width_m, height_m, vclass, color): (String, f64, f64, f64, String, Vec<i64>) =
-                item.extract()?;
-            let key = self.next_key;
-            self.next_key += 1;
-            self.vehicles.insert(vid, Static::new(key, length_m, width_m, height_m, &vclass, &color));
+    fn call<T>(
+        &self,
+        what: &dyn Fn() -> String,
+        f: impl FnOnce(Python<'_>, &Bound<'_, PyAny>) -> PyResult<T>,
+    ) -> Result<T> {
+        if !self.open {
+            return Err(Error::Simulation(
+                "SUMO is not running (the traffic was closed); call reset()".into(),
+            ));
         }
-        let py = ret.py();
-        let (k_pos, k_ang, k_speed, k_sig) = (
-            VAR_POSITION.into_pyobject(py)?,
-            VAR_ANGLE.into_pyobject(py)?,
-            VAR_SPEED.into_pyobject(py)?,
-            VAR_SIGNALS.into_pyobject(py)?,
-        );
-        for (k, v) in veh.iter() {
-            let vid = k.cast::<PyString>()?;
-            let vid = vid.to_str()?;
-            let Some(st) = self.vehicles.get(vid) else { continue };
-            let d = v.cast::<PyDict>()?;
-            let (x, y): (f64, f64) = field(d, k_pos.as_any(), vid)?.extract()?;
-            let angle: f64 = field(d, k_ang.as_any(), vid)?.extract()?;
-            let speed: f64 = field(d, k_speed.as_any(), vid)?.extract()?;
-            let signals: i64 = field(d, k_sig.as_any(), vid)?.extract()?;
-            out.agents.push(st.agent(x, y, angle, speed, signals));
-        }
-        let lights = tuple.get_item(2)?;
-        let k_state = TL_RED_YELLOW_GREEN_STATE.into_pyobject(py)?;
-        for (k, v) in lights.cast::<PyDict>()?.iter() {
-            let tl = k.cast::<PyString>()?.to_str()?.to_owned();
-            let Some(state) = v.cast::<PyDict>()?.get_item(&k_state)? else { continue };
-            let state: String = state.extract()?;
-            if self.lights.get(&tl) != Some(&state) {
-                out.lights.push((tl.clone(), state.clone()));
-                self.lights.insert(tl, state);
-            }
-        }
+        Python::attach(|py| f(py, self.ls.bind(py))).map_err(|e| err(&what(), e))
+    }
+}
+
+impl SumoTransport for PyLibsumoTransport {
+    fn kind(&self) -> &'static str {
+        "libsumo-python"
+    }
+
+    fn in_process(&self) -> bool {
+        true
+    }
+
+    fn start(&mut self, cmd: &[String]) -> std::result::Result<(), String> {
+        self.close();
+        self.tracked.clear();
+        Python::attach(|py| {
+            let ls = self.ls.bind(py);
+            ls.call_method1("start", (cmd.to_vec(),))?;
+            self.light_ids = ls.getattr("trafficlight")?.call_method0("getIDList")?.extract()?;
+            Ok(())
+        })
+        .map_err(|e: PyErr| {
+            self.close_inner();
+            e.to_string()
+        })?;
+        self.open = true;
         Ok(())
     }
 
-    fn call(&mut self, method: &str, extra: Option<(u64, String)>, out: &mut TrafficFrame) -> Result<()> {
-        Python::attach(|py| {
-            let obj = self.obj.bind(py).clone();
-            let movers = PyList::new(py, &self.sync.movers)?;
-            let ret = match &extra {
-                Some((seed, routes)) => {
-                    let net = self.sync.net.to_string_lossy().into_owned();
-                    let sync = self.sync.light_sync();
-                    let programs = self.sync.replaced_programs();
-                    obj.call_method1(
-                        method,
-                        (net, routes.as_str(), *seed, self.sync.demand.warmup_s, movers, sync, programs),
-                    )?
-                }
-                None => obj.call_method1(method, (movers,))?,
-            };
-            self.read(&ret, out)
+    fn close(&mut self) {
+        if self.open {
+            self.open = false;
+            self.close_inner();
+        }
+    }
+
+    fn time_s(&mut self) -> Result<f64> {
+        self.call(&|| "reading the time".into(), |_, ls| {
+            ls.getattr("simulation")?.call_method0("getTime")?.extract()
         })
-        .map_err(|e: PyErr| Error::Simulation(format!("SUMO co-simulation: {e}")))
+    }
+
+    fn light_ids(&mut self) -> Result<Vec<String>> {
+        Ok(self.light_ids.clone())
+    }
+
+    fn set_program(&mut self, tl: &str, phases: &[(String, f64)]) -> Result<()> {
+        self.call(&|| format!("setting the program of light {tl}"), |py, ls| {
+            let tls = ls.getattr("trafficlight")?;
+            let phase_cls = tls.getattr("Phase")?;
+            let list = PyList::empty(py);
+            for (state, d) in phases {
+                list.append(phase_cls.call1((*d, state.as_str()))?)?;
+            }
+            let logic = tls.getattr("Logic")?.call1(("dh_override", 0, 0, list))?;
+            tls.call_method1("setProgramLogic", (tl, logic))?;
+            tls.call_method1("setProgram", (tl, "dh_override"))?;
+            Ok(())
+        })
+    }
+
+    fn set_phase(&mut self, tl: &str, phase: usize, remaining_s: f64) -> Result<()> {
+        self.call(&|| format!("setting the phase of light {tl}"), |_, ls| {
+            let tls = ls.getattr("trafficlight")?;
+            tls.call_method1("setPhase", (tl, phase))?;
+            tls.call_method1("setPhaseDuration", (tl, remaining_s))?;
+            Ok(())
+        })
+    }
+
+    fn add(&mut self, vid: &str, route: &str, vtype: &str) -> Result<()> {
+        self.call(&|| format!("add {vid}"), |py, ls| {
+            let kw = PyDict::new(py);
+            kw.set_item("typeID", vtype)?;
+            kw.set_item("depart", "now")?;
+            ls.getattr("vehicle")?.call_method("add", (vid, route), Some(&kw))?;
+            Ok(())
+        })
+    }
+
+    fn remove(&mut self, vid: &str) -> Result<()> {
+        self.call(&|| format!("remove {vid}"), |_, ls| {
+            ls.getattr("vehicle")?.call_method1("remove", (vid,))?;
+            Ok(())
+        })
+    }
+
+    fn move_to_xy(&mut self, vid: &str, x: f64, y: f64, angle: f64, keep_route: u8) -> Result<Placed> {
+        let fns = &self.fns;
+        self.call(&|| format!("moveToXY {vid}"), |py, _| {
+            match fns.move_to_xy.bind(py).call1((vid, "", -1, x, y, angle, keep_route)) {
+                Ok(_) => Ok(Placed::Yes),
+                Err(e) if e.is_instance(py, fns.traci_exception.bind(py)) => Ok(Placed::Unmappable),
+                Err(e) => Err(e),
+            }
+        })
+    }
+
+    fn step(&mut self, departed: &mut Vec<String>) -> Result<()> {
+        let fns = &self.fns;
+        let ids: Vec<String> = self.call(&|| "simulationStep".into(), |py, _| {
+            fns.step.bind(py).call0()?;
+            fns.departed.bind(py).call0()?.extract()
+        })?;
+        *departed = ids;
+        Ok(())
+    }
+
+    fn vehicle_type(&mut self, vid: &str) -> Result<String> {
+        self.call(&|| format!("type of {vid}"), |_, ls| {
+            ls.getattr("vehicle")?.call_method1("getTypeID", (vid,))?.extract()
+        })
+    }
+
+    fn type_info(&mut self, vtype: &str) -> Result<TypeInfo> {
+        self.call(&|| format!("vehicle type {vtype}"), |_, ls| {
+            let vt = ls.getattr("vehicletype")?;
+            let color: Vec<i64> = vt.call_method1("getColor", (vtype,))?.extract()?;
+            let mut c = [0i64; 4];
+            for (d, s) in c.iter_mut().zip(&color) {
+                *d = *s;
+            }
+            Ok(TypeInfo {
+                length_m: vt.call_method1("getLength", (vtype,))?.extract()?,
+                width_m: vt.call_method1("getWidth", (vtype,))?.extract()?,
+                height_m: vt.call_method1("getHeight", (vtype,))?.extract()?,
+                vclass: vt.call_method1("getVehicleClass", (vtype,))?.extract()?,
+                color: c,
+            })
+        })
+    }
+
+    fn track(&mut self, vid: &str, key: u64) -> Result<()> {
+        self.call(&|| format!("tracking {vid}"), |py, ls| {
+            let vars = PyTuple::new(py, [VAR_POSITION, VAR_ANGLE, VAR_SPEED, VAR_SIGNALS])?;
+            ls.getattr("vehicle")?.call_method1("subscribe", (vid, vars))?;
+            Ok(())
+        })?;
+        self.tracked.insert(vid.to_string(), key);
+        Ok(())
+    }
+
+    fn read(&mut self, out: &mut Vec<VehicleState>) -> Result<()> {
+        out.clear();
+        let (fns, tracked) = (&self.fns, &self.tracked);
+        self.call(&|| "reading the vehicles".into(), |py, _| {
+            let all = fns.results.bind(py).call0()?;
+            let (k_pos, k_ang, k_speed, k_sig) = (
+                VAR_POSITION.into_pyobject(py)?,
+                VAR_ANGLE.into_pyobject(py)?,
+                VAR_SPEED.into_pyobject(py)?,
+                VAR_SIGNALS.into_pyobject(py)?,
+            );
+            // libsumo's results come in id order (a std::map), as the shim reads them.
+            for (k, v) in all.cast::<PyDict>()?.iter() {
+                let vid = k.cast::<PyString>()?;
+                let vid = vid.to_str()?;
+                let Some(&key) = tracked.get(vid) else { continue };
+                let d = v.cast::<PyDict>()?;
+                let (x, y): (f64, f64) = field(d, k_pos.as_any(), vid)?.extract()?;
+                out.push(VehicleState {
+                    key,
+                    x,
+                    y,
+                    angle: field(d, k_ang.as_any(), vid)?.extract()?,
+                    speed: field(d, k_speed.as_any(), vid)?.extract()?,
+                    signals: field(d, k_sig.as_any(), vid)?.extract()?,
+                    _pad: 0,
+                });
+            }
+            Ok(())
+        })
+    }
+
+    fn light_states(&mut self, out: &mut Vec<String>) -> Result<()> {
+        let (fns, ids) = (&self.fns, &self.light_ids);
+        let states: Vec<String> = self.call(&|| "reading the lights".into(), |py, _| {
+            ids.iter().map(|tl| fns.light_state.bind(py).call1((tl.as_str(),))?.extract()).collect()
+        })?;
+        *out = states;
+        Ok(())
+    }
+}
+
+impl PyLibsumoTransport {
+    fn close_inner(&self) {
+        // SUMO may already be gone (e.g. it failed mid-episode, or never started).
+        Python::attach(|py| {
+            let _ = self.ls.bind(py).call_method0("close");
+        });
+    }
+}
+
+impl Drop for PyLibsumoTransport {
+    fn drop(&mut self) {
+        self.close();
     }
 }
 
@@ -256,28 +270,4 @@ fn field<'py>(d: &Bound<'py, PyDict>, key: &Bound<'py, PyAny>, vid: &str) -> PyR
     d.get_item(key)?.ok_or_else(|| {
         pyo3::exceptions::PyKeyError::new_err(format!("SUMO subscription of {vid} lacks {key}"))
     })
-}
-
-impl TrafficModel for SumoBridge {
-    fn start(&mut self, input: &TrafficInput<'_>, seed: u64, out: &mut TrafficFrame) -> Result<()> {
-        self.vehicles.clear();
-        self.lights.clear();
-        self.next_key = 0;
-        let routes = self.sync.routes_xml(seed);
-        self.sync.fill_movers(input);
-        self.call("start", Some((seed, routes)), out)
-    }
-
-    fn tick(&mut self, input: &TrafficInput<'_>, out: &mut TrafficFrame) -> Result<()> {
-        self.sync.fill_movers(input);
-        self.call("tick", None, out)
-    }
-
-    fn drives_lights(&self) -> bool {
-        true
-    }
-
-    fn name(&self) -> &str {
-        "sumo"
-    }
 }

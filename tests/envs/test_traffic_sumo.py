@@ -22,7 +22,7 @@ from traffic_helpers import BENCH, IS_TRAFFIC, frame, make_env, run_expert, traf
 
 from drivehierarchy import _core
 from drivehierarchy._core import ConfigError, ScenarioError, SimulationError
-from drivehierarchy.envs.traffic import SumoTraffic, native
+from drivehierarchy.envs.traffic import native
 from drivehierarchy.scenarios import builtin_root, sumo_home
 
 FLOW_SCENARIO = "06_traffic_flow/ingolstadt_06_westbound_flow"
@@ -270,12 +270,30 @@ def test_builtin_traffic_flow_scenario_runs_on_sumo_by_default(backend: str) -> 
 # -- the two SUMO backends -------------------------------------------------------------------------
 
 
-def test_native_and_python_backends_give_the_same_traffic() -> None:
-    # Same command line, warm-up, movers, departure keys and vehicle order: bit-identical.
+def test_every_transport_gives_the_same_traffic() -> None:
+    # One orchestration (command line, warm-up, movers, departure keys, vehicle order) over
+    # libsumo (shim), the libsumo module and TraCI: bit-identical.
     native = run_expert(BENCH, seed=5, steps=60, sumo_backend="native")
-    python = run_expert(BENCH, seed=5, steps=60, sumo_backend="python")
-    assert native["counts"] == python["counts"]
-    assert native["traffic"] == python["traffic"] and native["trajectory"] == python["trajectory"]
+    for other in ("python", "traci"):
+        run = run_expert(BENCH, seed=5, steps=60, sumo_backend=other)
+        assert native["counts"] == run["counts"], other
+        assert native["traffic"] == run["traffic"] and native["trajectory"] == run["trajectory"], other
+
+
+def test_auto_runs_a_second_sumo_env_of_the_process_on_traci() -> None:
+    a, b = make_env(BENCH), make_env(BENCH)
+    try:
+        a.reset(seed=0)
+        b.reset(seed=0)
+        assert a._sumo is not None and b._sumo is not None
+        assert (a._sumo.transport, b._sumo.transport) == ("libsumo", "traci")
+        for _ in range(5):
+            a.step(a.expert_action())
+            b.step(b.expert_action())
+        np.testing.assert_array_equal(a.sim.actors_array(), b.sim.actors_array())
+    finally:
+        a.close()
+        b.close()
 
 
 def test_native_backend_is_the_default_and_a_missing_shim_falls_back(
@@ -283,7 +301,7 @@ def test_native_backend_is_the_default_and_a_missing_shim_falls_back(
 ) -> None:
     env = make_env(BENCH)
     try:
-        assert isinstance(env._sumo, _core.NativeSumo)
+        assert env._sumo is not None and env._sumo.transport == "libsumo"
     finally:
         env.close()
     # A build without SUMO's headers has no shim: "auto" says so once and uses the Python backend.
@@ -291,7 +309,7 @@ def test_native_backend_is_the_default_and_a_missing_shim_falls_back(
     missing = tmp_path / _core.NATIVE_SUMO_SHIM
     monkeypatch.setattr(native, "native_sumo_paths", lambda: (missing, lib, binary))
     with caplog.at_level(logging.WARNING, logger=native.__name__):
-        assert isinstance(native.make_sumo_traffic("auto"), SumoTraffic)
+        assert native.make_sumo_traffic("auto").transport == "libsumo-python"
     assert str(missing) in caplog.text and "Python libsumo backend" in caplog.text, caplog.text
     with pytest.raises(SimulationError, match="was not built"):
         native.make_sumo_traffic("native")

@@ -30,7 +30,7 @@ TERMINATIONS = {
 }
 
 
-@pytest.fixture(params=["native", "python"])
+@pytest.fixture(params=["native", "python", "traci"])
 def backend(request: pytest.FixtureRequest) -> str:
     return str(request.param)
 
@@ -65,10 +65,10 @@ def test_noisy_expert_ends_with_a_protocol_termination_on_both_backends() -> Non
     # This run used to raise at decision 111: after the noise took the ego > 5 m off its route
     # (placed with keepRoute=2, which replaces SUMO's copy of its route), keepRoute=1 could not
     # map it back onto that copy ("Could not map vehicle 'dh_ego', distance to road is 100.43").
-    runs = {b: noisy_expert(b) for b in ("native", "python")}
+    runs = {b: noisy_expert(b) for b in ("native", "python", "traci")}
     assert runs["native"]["decisions"] > 111, runs
     assert runs["native"]["reason"] in TERMINATIONS, runs
-    assert runs["native"] == runs["python"]
+    assert runs["native"] == runs["python"] == runs["traci"]
 
 
 def test_full_lock_off_the_network_steps_to_a_termination(backend: str) -> None:

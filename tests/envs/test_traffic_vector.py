@@ -1,4 +1,5 @@
-"""SUMO envs vectorised over processes (libsumo holds one simulation per process)."""
+"""SUMO envs vectorised: over processes (each on libsumo), and in one process (the first env on
+libsumo, the others on TraCI: libsumo holds one simulation per process)."""
 
 from __future__ import annotations
 
@@ -81,3 +82,33 @@ def test_a_dead_worker_is_an_error_not_a_hang() -> None:
         assert time.monotonic() - t0 < 60
     finally:
         venv.close(terminate=True)
+
+
+def test_sync_vector_env_runs_sumo_envs_in_one_process() -> None:
+    kw = {"scenario": BENCH, "front": None, "bev": None, "prompt": False}
+    venv = gym.make_vec("DriveHierarchy-R4", num_envs=3, vectorization_mode="sync", **kw)
+    try:
+        obs, _ = venv.reset(seed=[10, 11, 10])
+        transports = [e.unwrapped._sumo.transport for e in venv.envs]  # type: ignore[attr-defined]
+        assert transports == ["libsumo", "traci", "traci"]
+        action = np.tile(np.array([0.0, 6.0], np.float32), (3, 1))
+        for _ in range(12):
+            obs, _, _, _, _ = venv.step(action)
+    finally:
+        venv.close()
+    assert not np.array_equal(obs["state"][0], obs["state"][1])
+    np.testing.assert_array_equal(obs["state"][0], obs["state"][2])  # same seed: libsumo = TraCI
+
+
+def test_sb3_make_vec_env_runs_sumo_envs_in_one_process() -> None:
+    env_util = pytest.importorskip("stable_baselines3.common.env_util")
+    venv = env_util.make_vec_env(make_env, n_envs=2, seed=0)  # a DummyVecEnv
+    try:
+        venv.reset()
+        assert [e.unwrapped._sumo.transport for e in venv.envs] == ["libsumo", "traci"]
+        action = np.tile(np.array([0.0, 6.0], np.float32), (2, 1))
+        for _ in range(12):
+            obs, _, _, _ = venv.step(action)
+        assert obs["state"].shape[0] == 2 and np.isfinite(obs["state"]).all()
+    finally:
+        venv.close()

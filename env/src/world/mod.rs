@@ -21,6 +21,7 @@
 pub mod collision;
 pub mod idm;
 pub mod lights;
+pub mod sumo;
 pub mod traffic;
 pub mod vehicle;
 

@@ -72,14 +72,16 @@ class R4Config:
     prompt: bool = _rust_default("prompt")
     # Background traffic: "sumo" | "native" | "none"; None = the scenario's `[traffic]` mode.
     traffic: str | None = None
-    # SUMO mode's backend: "native" (libsumo's C++ API driven from Rust, no Python per tick),
-    # "python" (the libsumo module), "auto" = native when built, else python (docs/traffic.md).
+    # SUMO mode's transport: "native" (libsumo's C++ API through the shim, no Python per tick),
+    # "python" (the libsumo module), "traci" (SUMO as a subprocess), "auto" = native for the
+    # process's first SUMO env, TraCI for further ones, python without the shims (docs/traffic.md).
     sumo_backend: str = "auto"
 
     def __post_init__(self) -> None:
-        if self.sumo_backend not in ("auto", "native", "python"):
+        if self.sumo_backend not in ("auto", "native", "python", "traci"):
             raise ConfigError(
-                f"config `sumo_backend` = {self.sumo_backend!r}: expected 'auto', 'native' or 'python'"
+                f"config `sumo_backend` = {self.sumo_backend!r}: "
+                "expected 'auto', 'native', 'python' or 'traci'"
             )
         if self.traffic not in (None, "sumo", "native", "none"):
             raise ConfigError(

@@ -27,8 +27,8 @@ from gymnasium import spaces
 from drivehierarchy import _core
 from drivehierarchy._core import ConfigError, SimulationError
 from drivehierarchy.envs.config import R4Config
-from drivehierarchy.envs.traffic import SumoTraffic, resolve_traffic_mode
-from drivehierarchy.envs.traffic.native import check_python_sumo_free, make_sumo_traffic
+from drivehierarchy.envs.traffic import resolve_traffic_mode
+from drivehierarchy.envs.traffic.native import make_sumo_traffic, needs_new_session
 from drivehierarchy.scenarios import resolve_scenario, sumo_home
 
 STATE_FIELDS: tuple[str, ...] = tuple(_core.STATE_FIELDS)
@@ -100,7 +100,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         self.render_mode = render_mode
         self._sim: Any = None
         self._scenario_path: str | None = None
-        self._sumo: SumoTraffic | _core.NativeSumo | None = None
+        self._sumo: _core.SumoSession | None = None
         self._closed = False
         self._live = False  # an episode is running (reset since the last load/copy)
         self._load(config.scenario)
@@ -165,8 +165,10 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
             self._load(str(scenario))
         # The world seed comes from the env's np_random so seeding follows Gymnasium semantics.
         world_seed = int(self.np_random.integers(0, 2**63 - 1))
-        if isinstance(self._sumo, _core.NativeSumo):
-            check_python_sumo_free()
+        if self.traffic_mode == "sumo" and needs_new_session(self._sumo, self.config.sumo_backend):
+            # First SUMO env of the process on libsumo, the others ("auto") on TraCI.
+            self._close_traffic()
+            self._configure_traffic()
         obs, info = self._sim.reset(world_seed)
         self._last_frame = None
         self._live = True
