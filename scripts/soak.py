@@ -5,7 +5,7 @@
 Mixes the SUMO scenarios of the suite (both SUMO backends), the expert and every bad driver of
 `drivehierarchy.testing.bad_agents`, driven in this process; and a share (`--vlm-share`, 10 %)
 through `r4 evaluate` with the VLM agent (`--jobs 4`) against the loopback scripted server, which
-answers 20 % of requests badly (garbage, empty, non-numbers, malformed JSON), chosen by a hash
+answers 20 % of requests badly (prose, empty, non-numbers, out of range, JSON), chosen by a hash
 of the request so a repeat gets the same replies. Every task recurs, so repeats of the same
 (scenario, seed, agent) are compared.
 
@@ -35,28 +35,24 @@ from drivehierarchy.agents.vlm import VLMOptions
 from drivehierarchy.benchmark.r4 import runner
 from drivehierarchy.scenarios import builtin_scenarios, scenario_id
 from drivehierarchy.testing.bad_agents import KINDS, comparable_record, fuzz_episode
-from drivehierarchy.testing.openai_server import ChatRequest, Fault, ScriptedOpenAIServer, route_driver
+from drivehierarchy.testing.openai_server import ChatRequest, ScriptedOpenAIServer, route_driver
 
 AGENTS = ("expert", *KINDS)
-BAD_REPLIES: list[str | Fault] = [
+BAD_REPLIES = (
     "I am not sure what to do here.",
     "",
     "steer: nan\ntarget_speed_mps: inf",
     "steer: 7\ntarget_speed_mps: -3",
-    Fault.malformed_json(),
-]
+    '```json\n{"steer": 0.1, "target_speed_mps": 8}\n```',
+)
 
 
-def bad_20_percent(req: ChatRequest) -> str | Fault:
-    """The route driver, but a fifth of the requests (by a hash of their text, so the same
-    request always gets the same answer) get a bad reply instead."""
+def bad_20_percent(req: ChatRequest) -> str:
+    """The route driver, but a fifth of the requests (by a hash of their text, which names the
+    frame, so the same request always gets the same answer) get a bad reply instead."""
     digest = hashlib.sha256(req.user_text.encode("utf-8", "surrogatepass")).digest()
     if digest[0] % 5 == 0:
-        bad = BAD_REPLIES[digest[1] % len(BAD_REPLIES)]
-        # A malformed body on the first attempt only: the transport's retry then gets a reply.
-        if isinstance(bad, Fault) and req.attempt > 1:
-            return route_driver(req)
-        return bad
+        return BAD_REPLIES[digest[1] % len(BAD_REPLIES)]
     return route_driver(req)
 
 
@@ -197,6 +193,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--vlm-share", type=float, default=0.1, help="share through `r4 evaluate` (0.1)")
     ap.add_argument("--round", type=int, default=200, help="episodes per round (the first warms up)")
     ap.add_argument("--jobs", type=int, default=4, help="`r4 evaluate --jobs` (4)")
+    ap.add_argument("--distinct", type=int, default=300, help="distinct in-process tasks, cycled (300)")
     ap.add_argument("--out", type=Path, default=Path("runs/soak"))
     a = ap.parse_args(argv)
     a.out.mkdir(parents=True, exist_ok=True)
@@ -211,7 +208,9 @@ def main(argv: list[str] | None = None) -> int:
     sumo = [p for p in builtin_scenarios() if runs_sumo(p)]
     direct_tasks = [(p, agent, b) for p in sumo for agent in AGENTS for b in ("native", "python")]
     # Spread the agents over the scenarios so every round mixes them.
-    direct_tasks.sort(key=lambda t: hashlib.sha256(repr(t).encode()).hexdigest())
+    direct_tasks.sort(key=lambda t: hashlib.sha256(f"{scenario_id(t[0])} {t[1]} {t[2]}".encode()).hexdigest())
+    # A subset, cycled, so that every task recurs and its repeats are compared.
+    direct_tasks = direct_tasks[: a.distinct]
     # VLM batches run the whole suite (SUMO scenarios in worker processes, the rest in threads).
     vlm_scenarios = builtin_scenarios()
     vlm_per_round = max(1, round(a.round * a.vlm_share))
@@ -236,6 +235,8 @@ def main(argv: list[str] | None = None) -> int:
             now = resources()
             if rnd == 0:
                 warm = now
+            assert warm is not None
+            write_report(a.out, soak, warm, t0, server, finished=False)
             total = sum(soak.episodes.values())
             log(
                 f"round {rnd + 1}/{rounds}: {total} episodes ({soak.episodes['evaluate']} via r4 evaluate) "
@@ -244,10 +245,21 @@ def main(argv: list[str] | None = None) -> int:
             )
     finally:
         server.stop()
-    end = resources()
     assert warm is not None
+    report, ok = write_report(a.out, soak, warm, t0, server, finished=True)
+    log(json.dumps(report, indent=2))
+    log("PASS" if ok else "FAIL")
+    return 0 if ok else 1
+
+
+def write_report(
+    out: Path, soak: Soak, warm: dict[str, Any], t0: float, server: ScriptedOpenAIServer, finished: bool
+) -> tuple[dict[str, Any], bool]:
+    """OUT/soak.json (rewritten after every round, so a stopped soak still has its figures)."""
+    end = resources()
     growth = 100.0 * (end["rss_mb"] - warm["rss_mb"]) / warm["rss_mb"]
     report = {
+        "finished": finished,
         "episodes": soak.episodes,
         "wall_s": round(time.perf_counter() - t0, 1),
         "warm": warm,
@@ -263,9 +275,9 @@ def main(argv: list[str] | None = None) -> int:
         "mismatched_repeats": soak.mismatches,
         "errors": soak.errors,
         "terminations": dict(sorted(soak.terminations.items())),
-        "server": {"requests": server.stats.chat_requests, "faults": server.stats.faults},
+        "server": {"requests": server.stats.chat_requests},
     }
-    (a.out / "soak.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    (out / "soak.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
     ok = (
         growth < 5.0
         and end["children"] == 0
@@ -275,9 +287,7 @@ def main(argv: list[str] | None = None) -> int:
         and not soak.mismatches
         and not soak.errors
     )
-    log(json.dumps(report, indent=2))
-    log("PASS" if ok else "FAIL")
-    return 0 if ok else 1
+    return report, ok
 
 
 if __name__ == "__main__":
