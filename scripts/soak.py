@@ -21,6 +21,7 @@ import argparse
 import gc
 import hashlib
 import json
+import multiprocessing as mp
 import os
 import shutil
 import sys
@@ -54,6 +55,15 @@ def bad_20_percent(req: ChatRequest) -> str:
     if digest[0] % 5 == 0:
         return BAD_REPLIES[digest[1] % len(BAD_REPLIES)]
     return route_driver(req)
+
+
+def serve(urls: Any, stop: Any) -> None:
+    """The scripted server's process: publishes its URL, serves until `stop` is set."""
+    server = ScriptedOpenAIServer(bad_20_percent)
+    urls.put(server.start())
+    stop.wait()
+    print(f"server: {server.stats.chat_requests} requests", file=sys.stderr, flush=True)
+    server.stop()
 
 
 def runs_sumo(path: Path) -> bool:
@@ -93,9 +103,13 @@ def descendants() -> list[tuple[int, str]]:
     return sorted(out)
 
 
+# The soak's own helper processes (its server, multiprocessing's resource tracker): not leaks.
+OWN_PIDS: set[int] = set()
+
+
 def resources() -> dict[str, Any]:
     gc.collect()
-    kids = descendants()
+    kids = [(pid, name) for pid, name in descendants() if pid not in OWN_PIDS]
     return {
         "rss_mb": round(rss_mb(), 1),
         "threads": len(os.listdir("/proc/self/task")),
@@ -111,7 +125,7 @@ class Soak:
         self.out = out
         self.jobs = jobs
         self.log = log
-        self.first: dict[tuple[str, ...], str] = {}
+        self.first: dict[tuple[str, ...], str] = {}  # task → sha256 of its first record
         self.repeats = 0
         self.mismatches: list[str] = []
         self.errors: list[str] = []
@@ -119,6 +133,7 @@ class Soak:
         self.terminations: dict[str, int] = {}
 
     def _same_as_before(self, key: tuple[str, ...], record: str) -> None:
+        record = hashlib.sha256(record.encode()).hexdigest()
         if key in self.first:
             self.repeats += 1
             if self.first[key] != record:
@@ -217,11 +232,25 @@ def main(argv: list[str] | None = None) -> int:
     direct_per_round = a.round - vlm_per_round
 
     soak = Soak(a.out, a.jobs, log)
-    server = ScriptedOpenAIServer(bad_20_percent)
-    url = server.start()
+    # The server runs in its own process: its request bookkeeping is not the harness's memory.
+    ctx = mp.get_context("spawn")
+    urls: Any = ctx.Queue()
+    stop = ctx.Event()
+    server = ctx.Process(target=serve, args=(urls, stop), name="soak-openai-server")
+    server.start()
+    url = urls.get(timeout=120)
+    from multiprocessing import resource_tracker
+
+    OWN_PIDS.update(p for p in (server.pid, getattr(resource_tracker._resource_tracker, "_pid", None)) if p)
     t0 = time.perf_counter()
     warm: dict[str, Any] | None = None
     rounds = max(1, -(-a.episodes // a.round))
+    # The RSS baseline is taken once every task has run once (maps and nets loaded, caches warm):
+    # every later episode repeats one.
+    first_pass = max(
+        -(-len(direct_tasks) // max(1, direct_per_round)), -(-len(vlm_scenarios) // vlm_per_round)
+    )
+    warm_round = min(rounds, first_pass) - 1
     d = v = 0
     try:
         for rnd in range(rounds):
@@ -233,27 +262,31 @@ def main(argv: list[str] | None = None) -> int:
             soak.evaluate(batch, url, rnd)
             v += vlm_per_round
             now = resources()
-            if rnd == 0:
+            if rnd == warm_round:
                 warm = now
-            assert warm is not None
-            write_report(a.out, soak, warm, t0, server, finished=False)
+            if warm is not None:
+                write_report(a.out, soak, warm, t0, finished=False)
             total = sum(soak.episodes.values())
+            phase = " (warm-up)" if warm is None else ""
             log(
-                f"round {rnd + 1}/{rounds}: {total} episodes ({soak.episodes['evaluate']} via r4 evaluate) "
+                f"round {rnd + 1}/{rounds}{phase}: {total} episodes ({soak.episodes['evaluate']} via r4 evaluate) "
                 f"in {time.perf_counter() - t0:.0f} s; {now}; repeats {soak.repeats}, "
                 f"mismatches {len(soak.mismatches)}, errors {len(soak.errors)}"
             )
     finally:
-        server.stop()
+        stop.set()
+        server.join(timeout=30)
+        urls.close()
+        urls.join_thread()
     assert warm is not None
-    report, ok = write_report(a.out, soak, warm, t0, server, finished=True)
+    report, ok = write_report(a.out, soak, warm, t0, finished=True)
     log(json.dumps(report, indent=2))
     log("PASS" if ok else "FAIL")
     return 0 if ok else 1
 
 
 def write_report(
-    out: Path, soak: Soak, warm: dict[str, Any], t0: float, server: ScriptedOpenAIServer, finished: bool
+    out: Path, soak: Soak, warm: dict[str, Any], t0: float, finished: bool
 ) -> tuple[dict[str, Any], bool]:
     """OUT/soak.json (rewritten after every round, so a stopped soak still has its figures)."""
     end = resources()
@@ -275,7 +308,6 @@ def write_report(
         "mismatched_repeats": soak.mismatches,
         "errors": soak.errors,
         "terminations": dict(sorted(soak.terminations.items())),
-        "server": {"requests": server.stats.chat_requests},
     }
     (out / "soak.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
     ok = (

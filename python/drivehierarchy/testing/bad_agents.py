@@ -49,7 +49,7 @@ class _Seeded:
 
     def reset(self, env: gym.Env[Any, Any], info: dict[str, Any]) -> None:
         self.env = env.unwrapped
-        self.rng = np.random.default_rng([self.seed, int(info.get("tick", 0))])
+        self.rng = np.random.default_rng(self.seed)
 
     def expert(self) -> np.ndarray:
         return np.asarray(self.env.expert_action(), dtype=np.float64)
@@ -66,7 +66,8 @@ class RandomAgent(_Seeded):
 
 
 class NoisyExpertAgent(_Seeded):
-    """The expert with Gaussian steering noise of standard deviation `sigma`, clipped to [-1, 1]."""
+    """The expert with Gaussian steering noise of standard deviation `sigma` (float64, unclipped:
+    the env clips as the protocol says)."""
 
     def __init__(self, sigma: float, seed: int = 0) -> None:
         super().__init__(seed)
@@ -75,8 +76,8 @@ class NoisyExpertAgent(_Seeded):
 
     def act(self, obs: dict[str, Any], info: dict[str, Any]) -> np.ndarray:
         a = self.expert()
-        a[0] = np.clip(a[0] + self.rng.normal(0.0, self.sigma), -1.0, 1.0)
-        return a.astype(np.float32)
+        a[0] += self.rng.normal(0.0, self.sigma)
+        return a
 
 
 class DelayedExpertAgent(_Seeded):
