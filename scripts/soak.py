@@ -269,7 +269,8 @@ def main(argv: list[str] | None = None) -> int:
             total = sum(soak.episodes.values())
             phase = " (warm-up)" if warm is None else ""
             log(
-                f"round {rnd + 1}/{rounds}{phase}: {total} episodes ({soak.episodes['evaluate']} via r4 evaluate) "
+                f"round {rnd + 1}/{rounds}{phase}: {total} episodes "
+                f"({soak.episodes['evaluate']} via r4 evaluate) "
                 f"in {time.perf_counter() - t0:.0f} s; {now}; repeats {soak.repeats}, "
                 f"mismatches {len(soak.mismatches)}, errors {len(soak.errors)}"
             )
