@@ -1,5 +1,5 @@
 """Built for bad drivers: every suite scenario × the bad drivers of `drivehierarchy.testing.bad_agents`,
-on both SUMO backends where the scenario runs SUMO (≈ 1,700 episodes in worker processes).
+on both SUMO backends where the scenario runs SUMO (1,664 episodes in worker processes).
 
 Every episode must end with a protocol termination (no exception from `step`), and re-scoring its
 episode log (`r4 rescore`, the Rust replay) must give the record the run produced. Episodes end
