@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import json
 import math
+import tomllib
 from pathlib import Path
 from typing import Any
 
 import pytest
-import tomllib
 
 from drivehierarchy import _core
 from drivehierarchy.cli import main

@@ -4,31 +4,15 @@
 //! trigger by time or by distance) are flat optional fields checked by the resolver, so errors
 //! can say precisely which field is wrong instead of "no variant matched".
 
+pub use super::tables::{CATEGORIES, SCENARIO_VERSION};
+use crate::vehicle_params::VehicleParams;
 use crate::view::{ActorKind, SignKind};
-use crate::world::VehicleParams;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-/// Highest schema version this build reads.
-pub const SCENARIO_VERSION: u32 = 1;
-
-/// The ten R4 categories of PROTOCOL.md §2.6, as written in `category` and used as folder names.
-pub const CATEGORIES: [&str; 10] = [
-    "01_pedestrian",
-    "02_obstacles",
-    "03_turning",
-    "04_intersection",
-    "05_t_intersection",
-    "06_traffic_flow",
-    "07_sudden_brake",
-    "08_merging",
-    "09_yielding",
-    "10_roundabout",
-];
-
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
-#[schemars(transform = crate::scenario::json_schema::file_constraints)]
+#[schemars(transform = crate::scenario::schema_rules::file_constraints)]
 pub struct ScenarioFile {
     pub version: u32,
     pub id: String,
@@ -37,7 +21,8 @@ pub struct ScenarioFile {
     pub category: String,
     #[serde(default)]
     pub description: String,
-    /// Path relative to the scenario file, or `sumo:<path under SUMO_HOME>`.
+    /// Path relative to the scenario file, `sumo:<path under SUMO_HOME>`, or `builtin:<name>`
+    /// for a map shipped with the package (`builtin:town01`, `builtin:town02`, ...).
     pub map: String,
     /// T_ref: the ego's reference duration (efficiency term only).
     #[serde(default)]
@@ -68,7 +53,7 @@ pub struct ScenarioFile {
 /// `yaw_deg` (counter-clockwise from east) overrides the lane heading.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
-#[schemars(transform = crate::scenario::json_schema::place_alternatives)]
+#[schemars(transform = crate::scenario::schema_rules::place_alternatives)]
 pub struct PlaceSpec {
     #[serde(default)]
     pub lane: Option<String>,
@@ -86,7 +71,7 @@ pub struct PlaceSpec {
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
-#[schemars(transform = crate::scenario::json_schema::ego_alternatives)]
+#[schemars(transform = crate::scenario::schema_rules::ego_alternatives)]
 pub struct EgoSpec {
     #[serde(default)]
     pub start: Option<PlaceSpec>,
@@ -144,7 +129,7 @@ pub enum AtEndSpec {
 /// One point of a waypoint path; `speed_mps` is the speed on the leg that arrives here.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
-#[schemars(transform = crate::scenario::json_schema::place_alternatives)]
+#[schemars(transform = crate::scenario::schema_rules::place_alternatives)]
 pub struct WaypointSpec {
     #[serde(default)]
     pub lane: Option<String>,
@@ -164,7 +149,7 @@ pub struct WaypointSpec {
 /// lanes inserted automatically), cut to [`start_s`, `end_s`] along the route.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
-#[schemars(transform = crate::scenario::json_schema::route_alternatives)]
+#[schemars(transform = crate::scenario::schema_rules::route_alternatives)]
 pub struct RouteSpec {
     #[serde(default)]
     pub edges: Option<Vec<String>>,
@@ -185,7 +170,7 @@ pub struct RouteSpec {
 /// What the `of` of a distance trigger refers to.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(untagged)]
-#[schemars(transform = crate::scenario::json_schema::of_alternatives)]
+#[schemars(transform = crate::scenario::schema_rules::of_alternatives)]
 pub enum OfSpec {
     Point([f64; 2]),
     /// Only `"actor_self"`: the actor's own start position.
@@ -196,7 +181,7 @@ pub enum OfSpec {
 /// Start trigger: exactly one of `time_s` or `ego_within_m` (+ `of`, default `"actor_self"`).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
-#[schemars(transform = crate::scenario::json_schema::trigger_alternatives)]
+#[schemars(transform = crate::scenario::schema_rules::trigger_alternatives)]
 pub struct TriggerSpec {
     #[serde(default)]
     pub time_s: Option<f64>,
@@ -257,7 +242,7 @@ pub struct LightPhaseSpec {
 /// (+ `phase_elapsed_s`) sets where it is at t = 0, `phases` replaces it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
-#[schemars(transform = crate::scenario::json_schema::light_alternatives)]
+#[schemars(transform = crate::scenario::schema_rules::light_alternatives)]
 pub struct LightOverrideSpec {
     pub tls: String,
     #[serde(default)]
@@ -274,7 +259,7 @@ pub struct LightOverrideSpec {
 /// trigger, decelerate at `decel_mps2` to `to_speed_mps`; resume after `hold_s` if given.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
-#[schemars(transform = crate::scenario::json_schema::brake_alternatives)]
+#[schemars(transform = crate::scenario::schema_rules::brake_alternatives)]
 pub struct BrakeSpec {
     #[serde(default)]
     pub at_s: Option<f64>,
@@ -289,7 +274,7 @@ pub struct BrakeSpec {
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
-#[schemars(transform = crate::scenario::json_schema::actor_alternatives)]
+#[schemars(transform = crate::scenario::schema_rules::actor_alternatives)]
 pub struct ActorSpec {
     #[serde(default)]
     pub name: Option<String>,
