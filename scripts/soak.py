@@ -27,10 +27,9 @@ import shutil
 import sys
 import threading
 import time
+import tomllib
 from pathlib import Path
 from typing import Any
-
-import tomllib
 
 from drivehierarchy.agents.vlm import VLMOptions
 from drivehierarchy.benchmark.r4 import runner

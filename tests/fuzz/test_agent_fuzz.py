@@ -9,6 +9,7 @@ only by the protocol's own terminations: nothing is cut short.
 from __future__ import annotations
 
 import math
+import tomllib
 from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -16,7 +17,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-import tomllib
 
 from drivehierarchy import ConfigError
 from drivehierarchy.envs.r4 import DriveHierarchyR4Env
