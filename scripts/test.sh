@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The whole test suite: formatting and lints (Rust + Python), the stub contract, the docs site,
 # Rust tests and the Python tests (Gymnasium/SB3 checkers, SUMO nets, loopback VLM server
-# included), and the wheel smoke test from a fresh venv. Installs every extra into .venv first.
+# included), the wheel smoke test from a fresh venv, and a bounded run of every fuzz target. Installs every extra into .venv first.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install.sh all
@@ -14,5 +14,6 @@ echo "== ruff";         $PY -m ruff check .
 echo "== stubtest";     $PY -m mypy.stubtest drivehierarchy._core --allowlist python/stubtest-allowlist.txt
 echo "== docs";         DISABLE_MKDOCS_2_WARNING=true NO_MKDOCS_2_WARNING=1 $PY -m mkdocs build --strict --quiet --site-dir "$(mktemp -d)"
 echo "== wheel";        bash scripts/wheel_check.sh
+echo "== fuzz";         bash scripts/fuzz.sh 8
 echo "== cargo test";   cargo test --workspace --exclude dh-py --locked
 echo "== pytest";       $PY -m pytest tests "$@"

@@ -63,6 +63,9 @@ pub struct DrivableIndex {
 
 /// Cells along an axis for a given bound; the grid never exceeds ~2 M cells.
 const MAX_CELLS: f64 = 2.0e6;
+/// Cells along one axis at most: the total cap alone lets a long thin network (say, one vertex
+/// 1e97 m away) get billions of cells along its long side, and a build that never ends.
+const MAX_AXIS_CELLS: f64 = 16384.0;
 const MIN_CELL_M: f64 = 8.0;
 
 impl DrivableIndex {
@@ -126,7 +129,7 @@ impl DrivableIndex {
         let max_hw = segs.iter().map(|s| s.half_width).fold(0.0, f64::max);
         let bounds = bounds.inflate(max_hw + 1.0);
         let (w, h) = (bounds.max.x - bounds.min.x, bounds.max.y - bounds.min.y);
-        let cell = MIN_CELL_M.max((w * h / MAX_CELLS).sqrt());
+        let cell = MIN_CELL_M.max((w * h / MAX_CELLS).sqrt()).max(w.max(h) / MAX_AXIS_CELLS);
         let nx = ((w / cell).ceil() as usize).max(1);
         let ny = ((h / cell).ceil() as usize).max(1);
         let mut idx =
