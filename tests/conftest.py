@@ -1,28 +1,69 @@
-"""Shared fixtures: where the original release's reference files live (read-only)."""
+"""Shared fixtures: where the original release's reference files live (read-only), one pool of
+worker processes, and the reference policies' episodes over the suite (driven once per session)."""
 
 from __future__ import annotations
 
+import multiprocessing as mp
+import os
+from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 # The original release's reference files sit beside the checkout, never inside it.
 OFFICIAL_DIR = REPO_ROOT.parent / "shared" / "official"
+# Worker processes for the suite-wide tests: the CI machine has 2 cores.
+WORKERS = 2
+
+
+def _require_official(path: Path = OFFICIAL_DIR, what: str = "original release files") -> Path:
+    """`path` (under `../shared/official`) if it exists. Absent: the test skips with one line —
+    except in CI (`CI=true`), where the files are provisioned and their absence is a failure."""
+    if path.exists():
+        return path
+    message = f"{what} not found at {path}"
+    if os.environ.get("CI", "").lower() == "true":
+        pytest.fail(f"{message} (CI=true: they must be present)", pytrace=False)
+    pytest.skip(message)
+
+
+@pytest.fixture(scope="session")
+def require_official() -> Any:
+    """The check every test needing `../shared/official` uses: `require_official(path, what)`."""
+    return _require_official
 
 
 @pytest.fixture(scope="session")
 def official_dir() -> Path:
-    """`../shared/official` relative to the repository root; skips the test when absent."""
-    if not OFFICIAL_DIR.is_dir():
-        pytest.skip(f"original release files not found at {OFFICIAL_DIR}")
-    return OFFICIAL_DIR
+    """`../shared/official` relative to the repository root (see `_require_official`)."""
+    return _require_official()
 
 
 @pytest.fixture(scope="session")
 def openloop_data_dir(official_dir: Path) -> Path:
     """The released open-loop sample records (`Open_Loop_Evaluation/*.jsonl`)."""
-    path = official_dir / "Open_Loop_Evaluation"
-    if not path.is_dir():
-        pytest.skip(f"open-loop sample records not found at {path}")
-    return path
+    return _require_official(official_dir / "Open_Loop_Evaluation", "open-loop sample records")
+
+
+@pytest.fixture(scope="session")
+def worker_pool() -> Iterator[ProcessPoolExecutor]:
+    """Spawned worker processes (one episode at a time each, so SUMO's one-simulation-per-process
+    libsumo is fine), shared by every test that drives the whole suite."""
+    with ProcessPoolExecutor(max_workers=WORKERS, mp_context=mp.get_context("spawn")) as pool:
+        yield pool
+
+
+@pytest.fixture(scope="session")
+def reference_rows() -> list[dict[str, Any]]:
+    """The four reference policies of `drivehierarchy scenario probe` (expert, zero, constant,
+    follower) over every built-in scenario, seed 0, state-only: driven once per test session and
+    shared by every test that needs them."""
+    from drivehierarchy import suite_probe
+    from drivehierarchy.scenarios import builtin_scenarios, sumo_home
+
+    if sumo_home() is None:
+        pytest.skip("eclipse-sumo is not installed")
+    return suite_probe.probe(builtin_scenarios(), seed=0, jobs=WORKERS, progress=False)

@@ -1,7 +1,7 @@
 """CI-sized end to end (≈ 1–2 min on 2 cores): collect expert demonstrations (Minari), train BC and
-PPO through the CLI, save, resume after a kill, and score the models through `r4 evaluate`
-exactly like any other agent. The full-size targets are measured by scripts/train_baselines.py
-(docs/baselines.md)."""
+PPO through the CLI, save, resume after a kill at a step count, and score the models through
+`r4 evaluate` exactly like any other agent. Seeded, single-threaded, deterministic torch. Whether
+PPO learns is measured by scripts/train_baselines.py (docs/baselines.md), not asserted here."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import shutil
 import signal
 import subprocess
 import sys
-import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +47,20 @@ CLASSIC = [
     "09_yielding/town01_09_yield_left_turn",
     "10_roundabout/town01_10_roundabout_exit_south",
 ]
+
+
+@pytest.fixture(scope="module", autouse=True)
+def deterministic_torch() -> Iterator[None]:
+    """BC / DAgger train in this process: one thread and deterministic kernels, so what a test
+    learns does not depend on the machine's core count (restored afterwards)."""
+    import torch
+
+    threads, strict = torch.get_num_threads(), torch.are_deterministic_algorithms_enabled()
+    torch.set_num_threads(1)
+    torch.use_deterministic_algorithms(True)
+    yield
+    torch.set_num_threads(threads)
+    torch.use_deterministic_algorithms(strict)
 
 
 @pytest.fixture(scope="module")
@@ -167,40 +181,63 @@ def test_the_agent_drives_exactly_like_the_training_wrappers(demos: Path, tmp_pa
     assert via_runner == wrapped
 
 
-def test_ppo_learns_saves_resumes_after_a_kill_and_evaluates(tmp_path: Path) -> None:
-    """Reduced version of the PPO target: 16k decisions on the T-junction left turn (where the
-    constant-speed policy drives straight on and scores 21) must beat it by 30 points."""
+# Runs the CLI in a child process with torch single-threaded and deterministic; with a step count
+# as its first argument, the child SIGKILLs itself right after saving the checkpoint at that step
+# (a kill at a step count, not at a wall-clock moment, so every machine kills the same run).
+CHILD = """
+import os, signal, sys
+import torch
+torch.set_num_threads(1)
+torch.use_deterministic_algorithms(True)
+from stable_baselines3.common import callbacks
+kill_at = int(sys.argv[1])
+
+class KillAfterCheckpoint(callbacks.CheckpointCallback):
+    def _on_step(self):
+        ok = super()._on_step()
+        if kill_at and self.num_timesteps >= kill_at:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return ok
+
+callbacks.CheckpointCallback = KillAfterCheckpoint
+from drivehierarchy.cli import main
+sys.exit(main(sys.argv[2:]))
+"""
+
+
+def test_ppo_trains_saves_resumes_after_a_kill_and_evaluates(tmp_path: Path) -> None:
+    """Mechanics only (whether PPO learns is measured by scripts/train_baselines.py): train, get
+    SIGKILLed at step 2048 right after its checkpoint, resume from it to 4096, save, evaluate."""
     out = tmp_path / "ppo"
     args = [
-        sys.executable, "-m", "drivehierarchy.cli", "baselines", "train", "ppo", "--suite", str(T_JUNCTION),
-        "--held-out", "0", "--envs", "8", "--vec", "dummy", "--checkpoint-every", "2048",
-        "--hp", "n_steps=256", "--out", str(out),
+        "baselines", "train", "ppo", "--suite", str(T_JUNCTION), "--held-out", "0", "--envs", "8",
+        "--vec", "dummy", "--checkpoint-every", "2048", "--hp", "n_steps=256", "--seed", "0",
+        "--steps", "4096", "--out", str(out),
     ]  # fmt: skip
-    proc = subprocess.Popen([*args, "--steps", "1000000"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    deadline = time.monotonic() + 120
-    while not list((out / "checkpoints").glob("rl_model_*_steps.zip")):
-        assert proc.poll() is None, proc.stderr.read().decode() if proc.stderr else ""
-        assert time.monotonic() < deadline, "no checkpoint within 120 s"
-        time.sleep(0.5)
-    time.sleep(1.0)  # let the checkpoint file be complete
-    proc.send_signal(signal.SIGKILL)
-    proc.wait()
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "CUBLAS_WORKSPACE_CONFIG": ":4096:8"}
+    killed = subprocess.run(
+        [sys.executable, "-c", CHILD, "2048", *args], capture_output=True, text=True, env=env, timeout=300
+    )
+    assert killed.returncode == -signal.SIGKILL, killed.stderr
+    assert [p.name for p in (out / "checkpoints").glob("*.zip")] == ["rl_model_2048_steps.zip"]
     assert not (out / "model.zip").exists()
-    resumed = [*args, "--steps", "16384"]
-    done = subprocess.run(resumed, capture_output=True, text=True, timeout=300, check=False)
+    done = subprocess.run(
+        [sys.executable, "-c", CHILD, "0", *args], capture_output=True, text=True, env=env, timeout=300
+    )
     assert done.returncode == 0, done.stderr
-    assert "resuming from" in done.stderr
+    assert "resuming from" in done.stderr and "rl_model_2048_steps.zip" in done.stderr
     meta = read_meta(out / "model.zip")
-    assert meta["algo"] == "ppo" and meta["steps"] >= 16384
+    assert meta["algo"] == "ppo" and meta["steps"] == 4096
     assert (out / "learning_curve.png").stat().st_size > 0
     assert list((out / "tb").rglob("events.out.tfevents.*"))
     assert list((out / "monitor").glob("*.monitor.csv"))
     model = f"sb3:{out / 'model.zip'}"
     cli("r4", "evaluate", "--agent", model, "--suite", T_JUNCTION, "--out", tmp_path / "ev")
-    cli("r4", "evaluate", "--agent", "constant8", "--suite", T_JUNCTION, "--out", tmp_path / "c8")
-    [ppo] = scores(tmp_path / "ev").values()
-    [constant] = scores(tmp_path / "c8").values()
-    assert ppo >= constant + 30.0, (ppo, constant)
+    [record] = [json.loads(x)["score"] for x in (tmp_path / "ev" / "results.jsonl").read_text().splitlines()]
+    assert record["termination_reason"] and record["decisions"] > 0
+    # The same model through the same harness scores the same (the evaluation is deterministic).
+    cli("r4", "evaluate", "--agent", model, "--suite", T_JUNCTION, "--out", tmp_path / "ev2")
+    assert scores(tmp_path / "ev2") == scores(tmp_path / "ev")
 
 
 def test_bad_inputs_fail_with_clear_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

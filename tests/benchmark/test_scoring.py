@@ -12,8 +12,6 @@ import pytest
 from drivehierarchy import ConfigError, _core
 from drivehierarchy.benchmark.openloop.scoring import PredictionFileWarning, score_run
 
-REPO = Path(__file__).resolve().parents[2]
-OFFICIAL = REPO.parent / "shared" / "official" / "Open_Loop_Evaluation"
 TASKS = {t["id"]: t for t in _core.openloop_tasks()}
 
 
@@ -47,12 +45,10 @@ def _perfect(task: str, record: dict[str, Any]) -> str:
     return str(record["answer"])
 
 
-def _official_records() -> dict[str, list[dict[str, Any]]]:
-    if not OFFICIAL.is_dir():
-        pytest.skip(f"{OFFICIAL} not present")
+def _official_records(data: Path) -> dict[str, list[dict[str, Any]]]:
     out = {}
     for tid, t in TASKS.items():
-        lines = (OFFICIAL / f"{t['stem']}.jsonl").read_text(encoding="utf-8").splitlines()
+        lines = (data / f"{t['stem']}.jsonl").read_text(encoding="utf-8").splitlines()
         out[tid] = [json.loads(x) for x in lines if x.strip()]
     return out
 
@@ -61,8 +57,8 @@ def _rid(rec: dict[str, Any]) -> str:
     return str(rec.get("Question_id", rec.get("task_id")))
 
 
-def test_official_samples_perfect_answers_score_100(tmp_path: Path) -> None:
-    recs = _official_records()
+def test_official_samples_perfect_answers_score_100(tmp_path: Path, openloop_data_dir: Path) -> None:
+    recs = _official_records(openloop_data_dir)
     for tid, rs in recs.items():
         assert _core.openloop_task_from_record(json.dumps(rs[0])) == tid
         _write(tmp_path, tid, [_line(tid, _rid(r), _perfect(tid, r), r) for r in rs])
@@ -99,8 +95,8 @@ def test_official_samples_perfect_answers_score_100(tmp_path: Path) -> None:
     assert json.loads(per_record[0]).keys() == {"task", "id", "score", "parsed"}
 
 
-def test_official_samples_full_option_text_and_wrong_answers(tmp_path: Path) -> None:
-    recs = _official_records()
+def test_official_samples_full_option_text_and_wrong_answers(tmp_path: Path, openloop_data_dir: Path) -> None:
+    recs = _official_records(openloop_data_dir)
     # R2_2_B and R3_1 give the answer as full option text; reply with the bare letter,
     # with the option text without its letter, and with a wrong letter.
     for tid in ("R2_2_B", "R3_1"):

@@ -180,11 +180,20 @@ CASES = [
 ]
 
 
-@pytest.mark.parametrize(("scenario", "agent"), CASES, ids=[f"{s}-{i}" for i, (s, _) in enumerate(CASES)])
-def test_record_equals_the_original_scorers_arithmetic(scenario: str, agent: Any) -> None:
-    env = make(scenario, **NO_IMAGES)
-    rec = run_episode(env, agent(), seed=0).score
-    want = original_record(env.sim.episode_log(), rec)
+@pytest.fixture(scope="module")
+def case_runs() -> list[tuple[dict[str, Any], str]]:
+    """Each case driven once: (its score record, its episode log)."""
+    runs = []
+    for scenario, agent in CASES:
+        env = make(scenario, **NO_IMAGES)
+        runs.append((run_episode(env, agent(), seed=0).score, env.sim.episode_log()))
+    return runs
+
+
+@pytest.mark.parametrize("case", range(len(CASES)), ids=[f"{s}-{i}" for i, (s, _) in enumerate(CASES)])
+def test_record_equals_the_original_scorers_arithmetic(case: int, case_runs: list) -> None:
+    rec, log = case_runs[case]
+    want = original_record(log, rec)
     scores = ("score_route", "score_safety", "score_efficiency", "score_penalty", "score_composed")
     for key in ("status", *scores):
         assert rec[key] == want[key], (key, rec[key], want[key], rec["termination_reason"])
@@ -192,11 +201,9 @@ def test_record_equals_the_original_scorers_arithmetic(scenario: str, agent: Any
         assert rec["meta"][key] == value, (key, rec["meta"][key], value)
 
 
-def test_the_cases_cover_the_branches() -> None:
+def test_the_cases_cover_the_branches(case_runs: list) -> None:
     reasons, offroad, statuses = set(), [], set()
-    for scenario, agent in CASES:
-        env = make(scenario, **NO_IMAGES)
-        rec = run_episode(env, agent(), seed=0).score
+    for rec, _log in case_runs:
         reasons.add(rec["termination_reason"])
         offroad.append(rec["meta"]["offroad_time_s"])
         statuses.add(rec["status"])

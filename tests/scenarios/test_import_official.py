@@ -10,6 +10,7 @@ import json
 import math
 import tomllib
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -264,12 +265,11 @@ def test_broken_hero_fails_the_scene_with_reason(tmp_path: Path) -> None:
 
 
 @pytest.fixture(scope="module")
-def imported(tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest) -> tuple[Path, dict]:
-    official = request.getfixturevalue("official_dir")
-    scenes = official / CLOSE_LOOP / "Scenario_Onsite"
-    net = official / TONGJI / "tongji.net.xml"
-    if not scenes.is_dir() or not net.is_file():
-        pytest.skip(f"official scenes or tongji.net.xml not found under {official}")
+def imported(
+    tmp_path_factory: pytest.TempPathFactory, official_dir: Path, require_official: Any
+) -> tuple[Path, dict]:
+    scenes = require_official(official_dir / CLOSE_LOOP / "Scenario_Onsite", "official scenes")
+    net = require_official(official_dir / TONGJI / "tongji.net.xml", "tongji.net.xml")
     out = tmp_path_factory.mktemp("official")
     assert main(["scenario", "import-official", str(scenes), "--net", str(net), "--out", str(out)]) == 0
     return out, json.loads((out / "import_report.json").read_text(encoding="utf-8"))

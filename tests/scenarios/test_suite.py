@@ -86,10 +86,9 @@ def test_validates(path: Path) -> None:
 
 
 @pytest.fixture(scope="module")
-def probe_rows() -> list[dict]:
-    if sumo_home() is None:
-        pytest.skip("eclipse-sumo is not installed")
-    return suite_probe.probe(FILES, seed=0, jobs=2, progress=False)
+def probe_rows(reference_rows: list[dict]) -> list[dict]:
+    # Driven once per session (tests/conftest.py) and shared with the other suite-wide tests.
+    return reference_rows
 
 
 def test_solvable_and_discriminating(probe_rows: list[dict]) -> None:

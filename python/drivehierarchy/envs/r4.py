@@ -203,6 +203,10 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         if reply is not None and not isinstance(reply, str):
             raise ConfigError(f"config `action` = {reply!r}: a reply must be a str or None")
         self._check_live("step_reply")
+        if reply is not None and not reply.isascii():
+            # A lone surrogate (what a JSON "\ud800" escape decodes to) is no Unicode text and
+            # cannot cross into Rust: it becomes U+FFFD, like any undecodable byte of a reply.
+            reply = reply.encode("utf-16", "surrogatepass").decode("utf-16", "replace")
         obs, reward, terminated, truncated, info = self._sim.step_reply(reply)
         self._last_frame = None
         return self._shape_obs(obs), float(reward), bool(terminated), bool(truncated), info
