@@ -494,7 +494,7 @@ impl TrafficModel for NativeSumoBridge {
     fn start(&mut self, input: &TrafficInput<'_>, seed: u64, out: &mut TrafficFrame) -> Result<()> {
         self.vehicles.clear();
         self.lights.clear();
-        let routes = self.sync.routes_xml(seed);
+        let routes = self.sync.routes_xml(seed, input.variation_seed);
         self.sync.fill_movers(input);
         let session = self.session.clone();
         let mut s = lock(&session);

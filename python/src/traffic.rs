@@ -140,9 +140,9 @@ impl SumoSync {
             .collect()
     }
 
-    /// The SUMO route file of an episode.
-    pub fn routes_xml(&self, seed: u64) -> String {
-        self.demand.sumo_routes_xml(&self.map, seed, &self.ego, &self.mirrors)
+    /// The SUMO route file of an episode (the demand varied by `variation_seed`).
+    pub fn routes_xml(&self, seed: u64, variation_seed: u64) -> String {
+        self.demand.varied(variation_seed).sumo_routes_xml(&self.map, seed, &self.ego, &self.mirrors)
     }
 
     /// Movers for SUMO. The ego near its route is mapped onto the route's edges only
@@ -263,7 +263,7 @@ impl TrafficModel for SumoBridge {
         self.vehicles.clear();
         self.lights.clear();
         self.next_key = 0;
-        let routes = self.sync.routes_xml(seed);
+        let routes = self.sync.routes_xml(seed, input.variation_seed);
         self.sync.fill_movers(input);
         self.call("start", Some((seed, routes)), out)
     }

@@ -267,6 +267,8 @@ pub struct TrafficDemand {
     pub vehicles: Vec<DemandVehicle>,
     pub flows: Vec<DemandFlow>,
     pub random: Option<DemandRandom>,
+    /// Per-seed jitter of departures and speed factors (`[variation]`).
+    pub jitter: crate::scenario::variation::TrafficJitter,
 }
 
 /// A scenario actor that SUMO sees as a vehicle placed every tick (`dh_actor_<id>`).
@@ -732,6 +734,7 @@ pub fn resolve_traffic(
         vehicles,
         flows,
         random,
+        jitter: Default::default(),
     })
 }
 
@@ -772,7 +775,7 @@ impl TrafficDemand {
     ) -> Vec<DemandVehicle> {
         let Some(r) = &self.random else { return Vec::new() };
         let n = (r.density_per_km * self.lane_km(map, r)).round() as usize;
-        let mut rng = SplitMix::new(seed);
+        let mut rng = crate::scenario::variation::seeded_rng(seed, 0);
         // Departure edges weighted by their length.
         let weights: Vec<f64> =
             r.edges.iter().map(|&e| edge_length(map, e) * map.edges[e].lanes.len() as f64).collect();
@@ -856,7 +859,8 @@ impl TrafficDemand {
 
     /// The SUMO route file of one episode (times shifted so SUMO time 0 = episode −warmup_s):
     /// every vehicle type of the type file, the ego's and the mirrored actors' types, the ego
-    /// route, explicit vehicles, random trips and flows sorted by departure.
+    /// route, explicit vehicles, random trips and flows sorted by departure (vary the demand
+    /// first with [`TrafficDemand::varied`]).
     pub fn sumo_routes_xml(
         &self,
         map: &Network,

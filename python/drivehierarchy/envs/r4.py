@@ -125,7 +125,10 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         world_seed = int(self.np_random.integers(0, 2**63 - 1))
         if isinstance(self._sumo, _core.NativeSumo):
             check_python_sumo_free()
-        obs, info = self._sim.reset(world_seed)
+        # The scenario's variation follows the given seed itself: seed 0 plays the scenario as
+        # written, other seeds jitter it within its `[variation]` bounds; unseeded resets vary.
+        variation = int(seed) if seed is not None else world_seed
+        obs, info = self._sim.reset(world_seed, variation)
         self._last_frame = None
         return self._shape_obs(obs), info
 
