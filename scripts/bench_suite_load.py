@@ -40,13 +40,12 @@ import statistics
 import sys
 import tempfile
 import time
+import tomllib
 import warnings
 from collections import defaultdict
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
-
-import tomllib
 
 BUDGET_NO_SUMO_MS = 50.0
 BUDGET_SUMO_MS = 300.0

@@ -1,24 +1,57 @@
 #!/usr/bin/env bash
-# Installs drivehierarchy with every extra (SUMO, RL, reports, judge, dev tools) into the current
-# Python environment. Builds the Rust core with maturin (release). Safe to re-run.
+# Installs drivehierarchy into the project's own virtual environment `.venv/` (created on first
+# use; the system Python is never touched) and builds the Rust core with maturin (release).
+#   bash scripts/install.sh          the core: env, suite, expert, SUMO, VLM harness, reports, open loop
+#   bash scripts/install.sh all      every extra (what scripts/test.sh needs; pulls torch, ~6 GB)
+#   bash scripts/install.sh rl,dev   any extras of pyproject.toml
+# Safe to re-run. Needs Python >= 3.11 with venv, a Rust toolchain and a C++ compiler.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-python3 -m pip install --upgrade "pip>=23" "maturin>=1.7,<2" >/dev/null
-# The native SUMO backend's shim is compiled against the C++ headers of the pinned eclipse-sumo
-# wheel (python/build.rs): install that first and point the (isolated) build at it via SUMO_HOME.
-sumo_pin="$(grep -o '"eclipse-sumo==[^"]*"' pyproject.toml | tr -d '"')"
-python3 -m pip install "$sumo_pin"
-SUMO_HOME="$(python3 -c 'import sumo; print(sumo.SUMO_HOME)')"
+extras="${1:-}"
+PY="${PYTHON:-python3}"
+
+if ! command -v cargo >/dev/null; then
+    echo "install: no Rust toolchain (cargo) on PATH; install one with rustup (https://rustup.rs)" >&2
+    exit 1
+fi
+if [ ! -x .venv/bin/python ]; then
+    if ! "$PY" -c 'import sys; sys.exit(sys.version_info < (3, 11))'; then
+        echo "install: $("$PY" --version 2>&1) is too old: drivehierarchy needs Python >= 3.11 (set PYTHON=...)" >&2
+        exit 1
+    fi
+    "$PY" -m venv .venv || {
+        echo "install: '$PY -m venv' failed; on Debian/Ubuntu: apt-get install python3-venv" >&2
+        exit 1
+    }
+fi
+VPY=.venv/bin/python
+"$VPY" -m pip install --quiet --upgrade "pip>=23" "maturin>=1.7,<2"
+
+# SUMO's native libraries come with the pinned eclipse-sumo wheel; it is installed first so that
+# their system libraries can be checked below. (The build itself gets SUMO's C++ headers from the
+# same pin, a build requirement in pyproject.toml: no SUMO_HOME is needed.)
+sumo_pin="$(grep -o '"eclipse-sumo==[^"]*"' pyproject.toml | head -1 | tr -d '"')"
+"$VPY" -m pip install --quiet "$sumo_pin"
+SUMO_HOME="$("$VPY" -c 'import sumo; print(sumo.SUMO_HOME)')"
+
 # The shim needs a C++ compiler, and SUMO's libraries (libsumocpp, like the libsumo module) a few
-# system libraries (X11, GL) that a minimal Debian/Ubuntu image may lack.
+# system libraries (X11, GL) that a minimal Debian/Ubuntu image may lack. As root (CI, containers)
+# they are installed with apt-get; otherwise the missing packages are named and nothing is run.
+apt_packages="g++ libx11-6 libxext6 libxrender1 libgl1 libxcb1 libexpat1 zlib1g"
 missing="$(ldd "$SUMO_HOME/lib64/libsumocpp.so" | awk '/not found/ {print $1}' || true)"
 command -v c++ >/dev/null || missing="$missing c++"
 if [ -n "$missing" ]; then
-    echo "the native SUMO backend needs:$missing" >&2
-    if command -v apt-get >/dev/null; then
-        sudo=""; [ "$(id -u)" -ne 0 ] && sudo="sudo"
-        $sudo apt-get update -qq
-        $sudo apt-get install -y -qq g++ libx11-6 libxext6 libxrender1 libgl1 libxcb1 libexpat1 zlib1g
+    if [ "$(id -u)" -eq 0 ] && command -v apt-get >/dev/null; then
+        echo "install: installing system libraries for SUMO (missing:$missing)"
+        apt-get update -qq
+        DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $apt_packages
+    else
+        echo "install: SUMO's native libraries need:$missing" >&2
+        echo "install: on Debian/Ubuntu run: sudo apt-get install $apt_packages" >&2
+        exit 1
     fi
 fi
-SUMO_HOME="$SUMO_HOME" python3 -m pip install -e ".[all]"
+spec="."
+[ -n "$extras" ] && spec=".[$extras]"
+env -u SUMO_HOME "$VPY" -m pip install --quiet -e "$spec"
+echo "install: drivehierarchy${extras:+[$extras]} installed in .venv ($(du -sh .venv | cut -f1)); activate with: source .venv/bin/activate"

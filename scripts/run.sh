@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
-# Installs everything and runs the main job: the expert autopilot over every built-in R4
+# Installs the core into .venv and runs the main job: the expert autopilot over every built-in R4
 # scenario, with its summary table.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install.sh
-drivehierarchy r4 evaluate --agent expert --suite builtin --out runs/expert "$@"
+.venv/bin/drivehierarchy r4 evaluate --agent expert --suite builtin --out runs/expert "$@"

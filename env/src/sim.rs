@@ -231,6 +231,10 @@ pub struct StepOutcome {
 pub struct StepInfo {
     pub tick: u64,
     pub time_s: f64,
+    /// Sim time at which the scenario timeout ends the episode (2 × the scenario duration).
+    pub time_limit_s: f64,
+    /// `time_limit_s - time_s`, floored at 0: what an RL critic needs to bootstrap near the limit.
+    pub time_left_s: f64,
     pub decision: u64,
     pub command: u8,
     /// Best progress along the route so far (what S_route counts), metres.
@@ -715,9 +719,12 @@ impl Sim {
         let ego = ep.world.ego();
         let view = self.tracker.future_points(&ego.pose);
         let termination = ep.score.termination();
+        let time_limit_s = ep.score.max_sim_time_s();
         Ok(StepInfo {
             tick: ep.world.tick_count(),
             time_s: ep.world.time_s(),
+            time_limit_s,
+            time_left_s: (time_limit_s - ep.world.time_s()).max(0.0),
             decision: ep.decisions,
             command: navigation_command(&view.points) as u8,
             best_progress_m: ep.score.best_progress_m(),

@@ -16,6 +16,18 @@ from drivehierarchy._core import (
 R4_ENV_ID = "DriveHierarchy-R4"
 
 
+def _register_builtin_maps() -> None:
+    # `map = "builtin:town01"` in a scenario anywhere resolves to the maps this package ships.
+    from pathlib import Path
+
+    from drivehierarchy import _core
+
+    _core.set_builtin_maps_dir(str(Path(__file__).resolve().parent / "_data" / "scenarios" / "maps"))
+
+
+_register_builtin_maps()
+
+
 def register_envs() -> None:
     """Registers the package's Gymnasium ids; calling it again is a no-op."""
     from gymnasium.envs.registration import register, registry

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
+import signal
 import sys
 
 # Area modules, each with `register(subparsers)` adding its commands; every command sets
@@ -43,6 +45,14 @@ def main(argv: list[str] | None = None) -> int:
     except DriveHierarchyError as exc:
         print(f"drivehierarchy: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        # The reader went away (`drivehierarchy scenario list | head`): stop quietly, as a Unix
+        # tool killed by SIGPIPE would, and keep the interpreter's final flush from raising again.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 128 + signal.SIGPIPE
+    except KeyboardInterrupt:
+        print("drivehierarchy: interrupted", file=sys.stderr)
+        return 128 + signal.SIGINT
 
 
 if __name__ == "__main__":

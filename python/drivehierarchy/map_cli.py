@@ -87,6 +87,18 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     osm.add_argument("--json", action="store_true", help="print the summary as JSON")
     osm.set_defaults(func=_import_osm)
 
+    show = cmds.add_parser(
+        "show",
+        help="list a network's edges and lanes (ids, lengths, speed limits, allowed classes)",
+        description="NET is what a scenario's `map` key takes: a .net.xml path, `sumo:PATH` (a net "
+        "shipped with eclipse-sumo) or `builtin:NAME` (a map shipped with drivehierarchy).",
+    )
+    show.add_argument("net", help="network: path, sumo:PATH or builtin:NAME (e.g. builtin:town01)")
+    show.add_argument("--all", action="store_true", help="also internal, crossing and walking-area edges")
+    show.add_argument("--edge", action="append", default=[], metavar="ID", help="only this edge (repeatable)")
+    show.add_argument("--json", action="store_true", help="print everything as JSON")
+    show.set_defaults(func=_show)
+
 
 def netconvert_binary() -> Path:
     """`netconvert` of the installed eclipse-sumo package."""
@@ -262,4 +274,53 @@ def _import_osm(args: argparse.Namespace) -> int:
         f"{r['our_length_m']:.1f} m (sumolib: {r['sumolib_edges']} edges, {r['sumolib_length_m']:.1f} m)"
     )
     print(f"  netconvert warnings: {s['netconvert_warnings']}")
+    return 0
+
+
+def _classes(allow: list[str], everything: list[str]) -> str:
+    """The shorter of "a, b" and "all but x, y" (a lane open to all but pedestrians reads so)."""
+    if set(allow) >= set(everything):
+        return "all"
+    if not allow:
+        return "none"
+    missing = [c for c in everything if c not in allow]
+    return ", ".join(allow) if len(allow) <= len(missing) else "all but " + ", ".join(missing)
+
+
+def _show(args: argparse.Namespace) -> int:
+    from drivehierarchy.scenarios import sumo_home
+
+    if not args.net.startswith(("sumo:", "builtin:")) and not Path(args.net).exists():
+        raise ConfigError(f"map `{args.net}`: {args.net} does not exist")
+    net = json.loads(_core.map_summary(args.net, sumo_home()))
+    edges = [e for e in net["edges"] if args.all or e["function"] == "normal"]
+    if args.edge:
+        unknown = sorted(set(args.edge) - {e["id"] for e in net["edges"]})
+        if unknown:
+            from drivehierarchy._suggest import did_you_mean
+
+            ids = [e["id"] for e in net["edges"]]
+            raise ConfigError(f"map `{args.net}`: no edge `{unknown[0]}`{did_you_mean(unknown[0], ids)}")
+        edges = [e for e in net["edges"] if e["id"] in args.edge]
+    if args.json:
+        print(json.dumps({**net, "edges": edges}, indent=2))
+        return 0
+    everything = net["vclasses"]
+    x0, y0, x1, y1 = net["bounds"]
+    print(f"{net['path']}")
+    print(
+        f"  {len(net['edges'])} edges ({sum(e['function'] == 'normal' for e in net['edges'])} normal), "
+        f"{net['junctions']} junctions, {len(net['traffic_lights'])} traffic lights, "
+        f"{x1 - x0:.0f} m × {y1 - y0:.0f} m"
+    )
+    for e in edges:
+        ends = f"{e['from'] or '?'} → {e['to'] or '?'}"
+        kind = "" if e["function"] == "normal" else f" [{e['function']}]"
+        name = f" “{e['name']}”" if e.get("name") else ""
+        print(f"edge {e['id']}{kind}{name}: {ends}, {len(e['lanes'])} lane(s)")
+        for lane in e["lanes"]:
+            print(
+                f"  lane {lane['id']:<24} {lane['length_m']:8.1f} m  {lane['speed_mps']:5.1f} m/s  "
+                f"{lane['width_m']:4.1f} m wide  {_classes(lane['allow'], everything)}"
+            )
     return 0

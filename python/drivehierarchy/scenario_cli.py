@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import tomllib
 from pathlib import Path
 from typing import Any
-
-import tomllib
 
 from drivehierarchy import DriveHierarchyError, _core
 from drivehierarchy._core import ConfigError
@@ -195,8 +194,14 @@ def _show(args: argparse.Namespace) -> int:
     doc = _toml(path)
     summary["description"] = doc.get("description", "")
     summary["duration_s"] = doc.get("duration_s")
+    summary["ego"] = {k: doc.get("ego", {}).get(k) for k in ("start", "destination")}
     summary["scripted_actors"] = [
-        {"name": a.get("name"), "kind": a.get("kind"), "start": a.get("start", {"time_s": 0})}
+        {
+            "name": a.get("name"),
+            "kind": a.get("kind"),
+            "start": a.get("start", {"time_s": 0}),
+            "lanes": (a.get("route") or {}).get("lanes") if isinstance(a.get("route"), dict) else None,
+        }
         for a in doc.get("actors", [])
     ]
     if args.json:
@@ -207,7 +212,9 @@ def _show(args: argparse.Namespace) -> int:
         print(f"  {summary['description']}")
     print(f"  file: {path}")
     print(f"  map: {summary['map']}  ({summary['traffic_lights']} signal heads)")
+    print(f"  ego: from {_place(summary['ego']['start'])} to {_place(summary['ego']['destination'])}")
     print(f"  route: {len(summary['route_edges'])} edges, {summary['route_length_m']:.1f} m")
+    print(f"    edges: {' → '.join(summary['route_edges'])}")
     dur = summary["duration_s"]
     print(
         f"  T_ref: {summary['reference_duration_s']:.1f} s"
@@ -216,8 +223,17 @@ def _show(args: argparse.Namespace) -> int:
     print(f"  actors: {summary['actors']}, obstacles: {summary['obstacles']}, signs: {summary['signs']}")
     for a in summary["scripted_actors"]:
         print(f"    - {a['kind']}: {a['name'] or ''}  start {json.dumps(a['start'])}")
+        if a["lanes"]:
+            print(f"      lanes: {', '.join(a['lanes'])}")
     print(f"  traffic: {summary['traffic']}")
     return 0
+
+
+def _place(place: object) -> str:
+    """`lane C2T_1 at s = 20.0 m` for a lane place, else the place as written."""
+    if isinstance(place, dict) and "lane" in place:
+        return f"lane {place['lane']} at s = {place.get('s', 0.0)} m"
+    return json.dumps(place)
 
 
 def _preview(args: argparse.Namespace) -> int:

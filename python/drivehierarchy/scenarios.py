@@ -39,9 +39,12 @@ def resolve_scenario(scenario: str | Path | None) -> str:
     candidate = builtin_root() / "r4" / f"{scenario}.toml"
     if candidate.is_file():
         return str(candidate)
-    known = ", ".join(scenario_id(q) for q in builtin_scenarios()) or "none"
+    from drivehierarchy._suggest import did_you_mean
+
+    ids = [scenario_id(q) for q in builtin_scenarios()]
     raise ScenarioError(
-        f"scenario `{scenario}`: not a file and not a built-in scenario id (built-in: {known})"
+        f"scenario `{scenario}`: not a file and not a built-in scenario id"
+        f"{did_you_mean(str(scenario), ids)} (`drivehierarchy scenario list` shows all {len(ids)})"
     )
 
 

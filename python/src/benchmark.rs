@@ -270,6 +270,13 @@ fn openloop_calibrate<'py>(
     Ok(d)
 }
 
+/// Spearman's ρ of two equally long samples (average ranks for ties, as the calibration uses);
+/// NaN for fewer than 2 pairs, unequal lengths or a constant side.
+#[pyfunction]
+fn openloop_spearman(x: Vec<f64>, y: Vec<f64>) -> f64 {
+    calibrate::spearman(&x, &y).unwrap_or(f64::NAN)
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(openloop_tasks, m)?)?;
     m.add_function(wrap_pyfunction!(openloop_task_from_stem, m)?)?;
@@ -282,6 +289,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(openloop_frozen_weights, m)?)?;
     m.add_function(wrap_pyfunction!(openloop_score_params, m)?)?;
     m.add_function(wrap_pyfunction!(openloop_calibrate, m)?)?;
+    m.add_function(wrap_pyfunction!(openloop_spearman, m)?)?;
     m.add("OPENLOOP_UNICODE_VERSION", dh_benchmark::pyunicode::UNICODE_VERSION)?;
     Ok(())
 }

@@ -456,6 +456,64 @@ pub fn default_sim_config() -> String {
     serde_json::to_string(&SimConfig::default()).unwrap_or_default()
 }
 
+/// Registers the folder of the package's shipped maps for `map = "builtin:NAME"` (called once
+/// by `drivehierarchy/__init__.py`); `False` when a folder was registered already.
+#[pyfunction]
+pub fn set_builtin_maps_dir(path: PathBuf) -> bool {
+    dh_env::scenario::set_builtin_maps_dir(path)
+}
+
+/// The edges and lanes of a road network as JSON: `map` is what a scenario's `map` key takes (a
+/// path, `sumo:PATH` or `builtin:NAME`).
+#[pyfunction]
+#[pyo3(signature = (map, sumo_home=None))]
+pub fn map_summary(py: Python<'_>, map: &str, sumo_home: Option<PathBuf>) -> PyResult<String> {
+    use dh_env::map::{EdgeFunction, Network};
+    let here = std::path::Path::new("<command line>");
+    let path = dh_env::scenario::resolve_map_path(here, map, sumo_home.as_deref()).map_err(|e| err(py, e))?;
+    let net = py.detach(|| Network::from_file(&path)).map_err(|e| err(py, e))?;
+    let junction = |j: Option<dh_env::map::JunctionIdx>| j.map(|j| net.junctions[j].id.clone());
+    let edges: Vec<serde_json::Value> = net
+        .edges
+        .iter()
+        .map(|e| {
+            let lanes: Vec<serde_json::Value> = e
+                .lanes
+                .iter()
+                .map(|&l| {
+                    let lane = &net.lanes[l];
+                    serde_json::json!({
+                        "id": lane.id, "index": lane.index, "length_m": lane.length_m,
+                        "speed_mps": lane.speed_mps, "width_m": lane.width_m,
+                        "allow": lane.allow.sumo_names(),
+                    })
+                })
+                .collect();
+            let function = match e.function {
+                EdgeFunction::Normal => "normal",
+                EdgeFunction::Internal => "internal",
+                EdgeFunction::Crossing => "crossing",
+                EdgeFunction::WalkingArea => "walkingarea",
+                EdgeFunction::Connector => "connector",
+            };
+            serde_json::json!({
+                "id": e.id, "function": function, "from": junction(e.from), "to": junction(e.to),
+                "name": e.name, "priority": e.priority, "lanes": lanes,
+            })
+        })
+        .collect();
+    let b = net.bounds();
+    let out = serde_json::json!({
+        "path": path.display().to_string(),
+        "bounds": [b.min.x, b.min.y, b.max.x, b.max.y],
+        "junctions": net.junctions.len(),
+        "traffic_lights": net.tl_ids(),
+        "vclasses": dh_env::map::VClassSet::ALL.sumo_names(),
+        "edges": edges,
+    });
+    Ok(out.to_string())
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PySim>()?;
     m.add_class::<PyGifWriter>()?;
@@ -465,6 +523,8 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(validate_scenario, m)?)?;
     m.add_function(wrap_pyfunction!(scenario_json_schema, m)?)?;
     m.add_function(wrap_pyfunction!(default_sim_config, m)?)?;
+    m.add_function(wrap_pyfunction!(set_builtin_maps_dir, m)?)?;
+    m.add_function(wrap_pyfunction!(map_summary, m)?)?;
     m.add("STATE_FIELDS", dh_env::sim::STATE_FIELDS.to_vec())?;
     Ok(())
 }

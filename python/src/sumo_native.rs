@@ -196,9 +196,14 @@ impl Api {
         self.check(unsafe { (self.remove)(v.as_ptr()) }, &format!("remove {vid}"))
     }
 
-    fn move_to(&self, vid: &CStr, m: &Mover) -> Result<()> {
+    /// `Ok(false)` when SUMO cannot map the vehicle there (a TraCIException).
+    fn move_to(&self, vid: &CStr, m: &Mover) -> Result<bool> {
         let rc = unsafe { (self.move_to)(vid.as_ptr(), m.1, m.2, m.3, i32::from(m.5)) };
-        self.check(rc, &format!("moveToXY {}", vid.to_string_lossy()))
+        if rc == 1 {
+            return Ok(false);
+        }
+        self.check(rc, &format!("moveToXY {}", vid.to_string_lossy()))?;
+        Ok(true)
     }
 
     fn step(&self) -> Result<()> {
@@ -266,6 +271,8 @@ pub struct NativeSession {
     /// Scenario actor ids with a SUMO double.
     mirrors: BTreeSet<u32>,
     mirror_ids: HashMap<u32, CString>,
+    /// Ego (0) / actor ids taken out of SUMO because moveToXY could not map them.
+    out: BTreeSet<u32>,
     ego_id: CString,
     pub steps: u64,
 }
@@ -286,6 +293,7 @@ impl NativeSession {
             tmp: None,
             mirrors: BTreeSet::new(),
             mirror_ids: HashMap::new(),
+            out: BTreeSet::new(),
             ego_id: CString::new(EGO_ID).expect("no NUL"),
             steps: 0,
         })
@@ -375,6 +383,7 @@ impl NativeSession {
         }
         self.running = true;
         self.mirrors.clear();
+        self.out.clear();
         self.steps = 0;
         Ok(())
     }
@@ -386,23 +395,41 @@ impl NativeSession {
             let present: BTreeSet<u32> = movers.iter().map(|m| m.0).collect();
             let gone: Vec<u32> = self.mirrors.difference(&present).copied().collect();
             for ident in gone {
-                self.api.remove(&mirror_id(ident))?;
+                if !self.out.remove(&ident) {
+                    self.api.remove(&mirror_id(ident))?;
+                }
                 self.mirrors.remove(&ident);
             }
         }
         for m in movers {
-            if m.0 == 0 {
-                self.api.move_to(&self.ego_id, m)?;
-                continue;
-            }
-            if !self.mirrors.contains(&m.0) {
+            if m.0 != 0 && !self.mirrors.contains(&m.0) {
                 let vid = mirror_id(m.0);
                 self.api.add(&vid, EGO_ROUTE, &vid)?;
                 self.mirrors.insert(m.0);
             }
-            let vid =
-                self.mirror_ids.entry(m.0).or_insert_with(|| CString::new(mirror_id(m.0)).expect("no NUL"));
-            self.api.move_to(vid, m)?;
+            let vid = if m.0 == 0 {
+                &self.ego_id
+            } else {
+                &*self.mirror_ids.entry(m.0).or_insert_with(|| CString::new(mirror_id(m.0)).expect("no NUL"))
+            };
+            let name = vid.to_str().expect("ASCII id");
+            if self.out.contains(&m.0) {
+                // Out of SUMO since it could not be mapped: try it again at its new place.
+                if self.api.add(name, EGO_ROUTE, if m.0 == 0 { EGO_ID } else { name }).is_err() {
+                    continue;
+                }
+                self.out.remove(&m.0);
+            }
+            // keepRoute=1 maps onto SUMO's copy of the route, which a keepRoute=2 placement
+            // replaced; then the ego is placed anywhere.
+            if !self.api.move_to(vid, m)?
+                && !(m.5 == 1 && self.api.move_to(vid, &(m.0, m.1, m.2, m.3, m.4, 2))?)
+            {
+                // SUMO cannot place it (off its network, too far from a lane its class may
+                // use): it leaves SUMO until it can be mapped again.
+                let _ = self.api.remove(name);
+                self.out.insert(m.0);
+            }
         }
         Ok(())
     }

@@ -157,8 +157,21 @@ DH_API int dh_sumo_remove(const char* vid) {
     return guarded([&] { libsumo::Vehicle::remove(vid); });
 }
 
+// 1 (and the message in `dh_sumo_error()`) when SUMO cannot map the vehicle (a TraCIException:
+// off its network, too far from a lane its class may use); -1 on other failures.
 DH_API int dh_sumo_move(const char* vid, double x, double y, double angle, int32_t keep_route) {
-    return guarded([&] { libsumo::Vehicle::moveToXY(vid, "", -1, x, y, angle, keep_route); });
+    try {
+        libsumo::Vehicle::moveToXY(vid, "", -1, x, y, angle, keep_route);
+        return 0;
+    } catch (const libsumo::TraCIException& e) {
+        g_error = e.what();
+        return 1;
+    } catch (const std::exception& e) {
+        g_error = e.what();
+    } catch (...) {
+        g_error = "unknown C++ exception from libsumo";
+    }
+    return -1;
 }
 
 DH_API int dh_sumo_step(void) {

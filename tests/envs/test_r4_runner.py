@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from drivehierarchy import ConfigError
+from drivehierarchy import ConfigError, ScenarioError
 from drivehierarchy.benchmark.r4 import runner
 from drivehierarchy.cli import main
 from drivehierarchy.scenarios import builtin_root, builtin_scenarios
@@ -86,7 +86,7 @@ def test_cli_run_writes_frames(tmp_path: Path) -> None:
     out = tmp_path / "one"
     proc = subprocess.run(
         [sys.executable, "-m", "drivehierarchy.cli", "r4", "run", "--agent", "expert",
-         "--scenario", "01_pedestrian/town01_01_midblock_crossing", "--out", str(out), "--frames"],
+         "--scenario", "01_pedestrian/town01_01_midblock_crossing", "--out", str(out), "--frames", "--json"],
         capture_output=True, text=True, timeout=300, check=False,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
@@ -104,3 +104,52 @@ def test_scenario_validate_command(tmp_path: Path, capsys: pytest.CaptureFixture
     bad.write_text('version = 1\nid = "x"\n', encoding="utf-8")
     assert main(["scenario", "validate", str(bad)]) == 1
     assert "INVALID" in capsys.readouterr().out
+
+
+def test_a_traffic_table_without_mode_is_sumo_and_runs_in_a_worker(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The Rust loader decides (a `[traffic]` table without `mode` is SUMO), not the file's text."""
+    from drivehierarchy.benchmark.r4 import dispatch
+    from drivehierarchy.benchmark.r4.workers import WorkerPool
+    from drivehierarchy.envs.config import R4Config
+
+    src = builtin_root() / "r4" / "06_traffic_flow" / "bs3d_09_left_turner_queue.toml"
+    text = src.read_text(encoding="utf-8")
+    assert text.count('mode = "sumo"\n') == 1
+    folder = tmp_path / "suite" / "r4" / "06_traffic_flow"
+    folder.mkdir(parents=True)
+    (tmp_path / "suite" / "maps").symlink_to(builtin_root() / "maps")
+    path = folder / src.name
+    path.write_text(text.replace('mode = "sumo"\n', ""), encoding="utf-8")
+    assert runner.uses_sumo(path, R4Config())
+    assert not runner.uses_sumo(path, R4Config(traffic="none"))
+
+    started: list[int] = []
+
+    class CountingPool(WorkerPool):
+        def _start(self):  # type: ignore[no-untyped-def]
+            w = super()._start()
+            started.append(w.process.pid)
+            return w
+
+    monkeypatch.setattr(dispatch, "WorkerPool", CountingPool)
+    results = runner.evaluate([path], tmp_path / "run", runner.RunOptions(seeds=2, jobs=2), log=print)
+    assert len(started) == 2, "both seeds ran at once, each in a SUMO worker of its own"
+    assert [r["score"]["termination_reason"] for r in results] == ["destination_reached"] * 2
+
+
+def test_a_bad_scenario_file_fails_the_run_before_anything_is_written(tmp_path: Path) -> None:
+    bad = tmp_path / "suite" / "01_x" / "bad.toml"
+    bad.parent.mkdir(parents=True)
+    bad.write_text('version = 1\nid = "x"\n', encoding="utf-8")
+    with pytest.raises(ScenarioError, match=r"bad\.toml"):
+        runner.evaluate([*two_scenarios(), bad], tmp_path / "run", runner.RunOptions(), log=print)
+    assert not (tmp_path / "run").exists()
+
+
+def test_help_warns_that_sb3_archives_are_unpickled(capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(SystemExit):
+        main(["r4", "evaluate", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "unpickles" in text and "only load model files you trust" in text

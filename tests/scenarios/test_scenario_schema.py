@@ -5,12 +5,12 @@ from __future__ import annotations
 import copy
 import json
 import re
+import tomllib
 from pathlib import Path
 from typing import Any
 
 import jsonschema
 import pytest
-import tomllib
 
 from drivehierarchy import ScenarioError, _core
 from drivehierarchy.cli import main

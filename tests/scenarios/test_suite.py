@@ -8,11 +8,11 @@ all 100 scenarios (state-only, in worker processes) and checks the must-holds, t
 from __future__ import annotations
 
 import re
+import tomllib
 from collections import Counter
 from pathlib import Path
 
 import pytest
-import tomllib
 
 from drivehierarchy import _core, suite_probe
 from drivehierarchy.scenarios import builtin_root, sumo_home

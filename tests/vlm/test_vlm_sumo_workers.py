@@ -16,7 +16,6 @@ from pathlib import Path
 import pytest
 
 from conftest import short_scenarios
-from drivehierarchy import SimulationError
 from drivehierarchy.agents.vlm import PayloadOptions, VLMOptions
 from drivehierarchy.benchmark.r4 import runner
 from drivehierarchy.benchmark.r4.workers import WORKER_NAME, running_workers
@@ -99,18 +98,21 @@ def test_a_worker_killed_mid_episode_fails_its_scenario_clearly_and_a_rerun_resu
     sumo_key = runner.scenario_key(SUMO)
     out = tmp_path / "run"
     with ScriptedOpenAIServer(killer) as url:
-        with pytest.raises(SimulationError) as err:
+        with pytest.raises(runner.ScenariosFailed) as err:
             runner.evaluate(scenarios, out, _opts(url, jobs=3), log=print)
-        assert len(killed) == 1
+        assert len(killed) == 1 and err.value.failed == [sumo_key]
         msg = str(err.value)
-        assert msg.startswith(f"scenario {sumo_key}: worker process {WORKER_NAME}-0 (pid {killed[0]})")
+        assert msg.startswith(
+            f"scenario {sumo_key}: WorkerDied: worker process {WORKER_NAME}-0 (pid {killed[0]})"
+        )
         assert "died (exit code -9)" in msg and "2/3 scenarios finished" in msg and "run the same" in msg
-        # The others finished and were kept; the lost one says why; nothing is summarised.
+        # The others finished and were kept; the lost one is recorded and says why; the summary
+        # covers the finished ones and lists the failed one.
         assert sorted(runner.read_results(out)) == sorted(
             runner.scenario_key(p) for p in (OBSTACLES, YIELDING)
         )
-        assert "died" in json.loads((out / "scenes" / sumo_key / "error.json").read_text())["error"]
-        assert not (out / "summary.json").exists()
+        assert "died" in json.loads((out / "scenes" / sumo_key / "error.json").read_text())["message"]
+        assert json.loads((out / "summary.json").read_text())["failed"] == [sumo_key]
         assert running_workers() == []
 
         logged: list[str] = []
@@ -119,7 +121,7 @@ def test_a_worker_killed_mid_episode_fails_its_scenario_clearly_and_a_rerun_resu
     assert sum("done before, skipped" in m for m in logged) == 2
     assert not (out / "scenes" / sumo_key / "error.json").exists(), "redone from scratch"
     keys = [json.loads(line)["key"] for line in (out / "results.jsonl").read_text().splitlines()]
-    assert sorted(keys) == sorted(set(keys)) and len(keys) == 3
+    assert len(keys) == 4 and keys.count(sumo_key) == 2, "the failure line, then the redone one"
     assert [r["key"] for r in results] == [r["key"] for r in whole]
     for r in whole:
         assert _scene(out, r["key"]) == _scene(tmp_path / "whole", r["key"])

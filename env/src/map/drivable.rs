@@ -7,7 +7,6 @@
 //! corners between internal lanes). Everything lives in a uniform grid (CSR cell lists).
 
 use super::model::*;
-use super::network::Network;
 use crate::geom::{closest_on_segment, point_in_polygon, Aabb, Projection, Vec2};
 use smallvec::SmallVec;
 
@@ -67,12 +66,14 @@ const MAX_CELLS: f64 = 2.0e6;
 const MIN_CELL_M: f64 = 8.0;
 
 impl DrivableIndex {
-    pub(crate) fn build(net: &Network) -> DrivableIndex {
+    /// Built from the network's tables (not from `Network`, which owns the index: see
+    /// `super::network`), so this module sits below `network`.
+    pub(crate) fn build(edges: &[Edge], lanes: &[Lane], junctions: &[Junction]) -> DrivableIndex {
         let mut segs = Vec::new();
         let mut bounds = Aabb::EMPTY;
-        let mut lane_cum = vec![Vec::new(); net.lanes.len()];
-        for (li, lane) in net.lanes.iter().enumerate() {
-            let f = net.edges[lane.edge].function;
+        let mut lane_cum = vec![Vec::new(); lanes.len()];
+        for (li, lane) in lanes.iter().enumerate() {
+            let f = edges[lane.edge].function;
             if !lane.is_drivable() || !matches!(f, EdgeFunction::Normal | EdgeFunction::Internal) {
                 continue;
             }
@@ -104,13 +105,14 @@ impl DrivableIndex {
             }
         }
         let mut polys = Vec::new();
-        for (ji, j) in net.junctions.iter().enumerate() {
+        for (ji, j) in junctions.iter().enumerate() {
             if j.kind == "internal" || j.shape.len() < 3 {
                 continue;
             }
-            let has_car_lane = j.int_lanes.iter().any(|&l| {
-                net.lanes[l].is_drivable() && net.edges[net.lanes[l].edge].function == EdgeFunction::Internal
-            });
+            let has_car_lane = j
+                .int_lanes
+                .iter()
+                .any(|&l| lanes[l].is_drivable() && edges[lanes[l].edge].function == EdgeFunction::Internal);
             if has_car_lane {
                 let aabb = Aabb::from_points(&j.shape);
                 bounds.include(aabb.min);

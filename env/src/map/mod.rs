@@ -14,7 +14,9 @@ pub mod model;
 mod network;
 mod parse;
 mod route;
+mod signals;
 
 pub use drivable::DrivableIndex;
 pub use model::*;
 pub use network::Network;
+pub use signals::{signal_heads, SignalHead};

@@ -281,6 +281,18 @@ pub struct VClassSet(pub u64);
 impl VClassSet {
     pub const ALL: VClassSet = VClassSet(u64::MAX);
     pub const NONE: VClassSet = VClassSet(0);
+    /// SUMO's current names of the classes in the set, in SUMO's order.
+    pub fn sumo_names(self) -> Vec<&'static str> {
+        let mut seen = VClassSet(0);
+        let mut out = Vec::new();
+        for &(name, class) in VCLASS_NAMES {
+            if self.contains(class) && !seen.contains(class) {
+                seen = seen.with(class);
+                out.push(name);
+            }
+        }
+        out
+    }
     pub fn contains(self, c: VClass) -> bool {
         self.0 & (1 << c as u8) != 0
     }

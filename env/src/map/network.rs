@@ -1,4 +1,11 @@
 //! [`Network`]: the parsed net plus the lookup tables built once at load time.
+//!
+//! `Network` owns its [`DrivableIndex`] (built once at load, read through
+//! [`Network::drivable`]) so the index can never be out of step with the lanes it was built
+//! from, and every user gets it with the net. The dependency still runs one way: the index is built from
+//! the edge/lane/junction tables, never from `Network`; and the edge successor table that
+//! routing reads is built here, so `route` (the routing methods on `Network`) depends on this
+//! module and not the other way round.
 
 use super::drivable::DrivableIndex;
 use super::model::*;
@@ -271,8 +278,8 @@ impl Network {
             bounds,
             drivable: DrivableIndex::default(),
         };
-        net.succ = super::route::successors(&net);
-        net.drivable = DrivableIndex::build(&net);
+        net.succ = successors(&net);
+        net.drivable = DrivableIndex::build(&net.edges, &net.lanes, &net.junctions);
         Ok(net)
     }
 
@@ -337,6 +344,45 @@ impl Network {
     pub fn tl_logic(&self, tl: &str) -> Option<&TlLogic> {
         self.tl_logics.iter().find(|t| t.id == tl)
     }
+}
+
+/// Travel time of a lane at its speed limit (0.1 m/s floor keeps it finite).
+pub(super) fn lane_time(l: &Lane) -> f64 {
+    l.length_m / l.speed_mps.max(0.1)
+}
+
+/// Per normal edge: successor normal edges, the classes able to make that move (from lane,
+/// first via lane and to lane all allow them) and the fastest via travel time.
+fn successors(net: &Network) -> Vec<Vec<(EdgeIdx, VClassSet, f64)>> {
+    let mut out = vec![Vec::new(); net.edges.len()];
+    for (ei, e) in net.edges.iter().enumerate() {
+        if e.function != EdgeFunction::Normal {
+            continue;
+        }
+        let mut acc: HashMap<EdgeIdx, (VClassSet, f64)> = HashMap::new();
+        for &l in &e.lanes {
+            for &ci in net.connections_from_lane(l) {
+                let c = &net.connections[ci];
+                let to_edge = net.lanes[c.to_lane].edge;
+                if net.edges[to_edge].function != EdgeFunction::Normal {
+                    continue;
+                }
+                let mut set = net.lanes[l].allow.intersect(net.lanes[c.to_lane].allow);
+                let mut t = 0.0;
+                if let Some(v) = c.via {
+                    set = set.intersect(net.lanes[v].allow);
+                    t = lane_time(&net.lanes[v]);
+                }
+                let entry = acc.entry(to_edge).or_insert((VClassSet::NONE, f64::INFINITY));
+                entry.0 = VClassSet(entry.0 .0 | set.0);
+                entry.1 = entry.1.min(t);
+            }
+        }
+        let mut v: Vec<_> = acc.into_iter().map(|(k, (s, t))| (k, s, t)).collect();
+        v.sort_by_key(|x| x.0);
+        out[ei] = v;
+    }
+    out
 }
 
 /// Groups item indices by key into offsets + flat list.

@@ -2,7 +2,7 @@
 //! route centreline through junctions.
 
 use super::model::*;
-use super::network::Network;
+use super::network::{lane_time, Network};
 use crate::geom::{Polyline, Vec2};
 use crate::{Error, Result};
 use std::cmp::Ordering;
@@ -12,45 +12,6 @@ use std::collections::{BinaryHeap, HashMap};
 const LANE_CHANGE_RAMP_M: f64 = 30.0;
 /// Guard against malformed internal-lane chains that loop.
 const MAX_VIA_CHAIN: usize = 16;
-
-/// Travel time of a lane at its speed limit (0.1 m/s floor keeps it finite).
-fn lane_time(l: &Lane) -> f64 {
-    l.length_m / l.speed_mps.max(0.1)
-}
-
-/// Per normal edge: successor normal edges, the classes able to make that move (from lane,
-/// first via lane and to lane all allow them) and the fastest via travel time.
-pub(crate) fn successors(net: &Network) -> Vec<Vec<(EdgeIdx, VClassSet, f64)>> {
-    let mut out = vec![Vec::new(); net.edges.len()];
-    for (ei, e) in net.edges.iter().enumerate() {
-        if e.function != EdgeFunction::Normal {
-            continue;
-        }
-        let mut acc: HashMap<EdgeIdx, (VClassSet, f64)> = HashMap::new();
-        for &l in &e.lanes {
-            for &ci in net.connections_from_lane(l) {
-                let c = &net.connections[ci];
-                let to_edge = net.lanes[c.to_lane].edge;
-                if net.edges[to_edge].function != EdgeFunction::Normal {
-                    continue;
-                }
-                let mut set = net.lanes[l].allow.intersect(net.lanes[c.to_lane].allow);
-                let mut t = 0.0;
-                if let Some(v) = c.via {
-                    set = set.intersect(net.lanes[v].allow);
-                    t = lane_time(&net.lanes[v]);
-                }
-                let entry = acc.entry(to_edge).or_insert((VClassSet::NONE, f64::INFINITY));
-                entry.0 = VClassSet(entry.0 .0 | set.0);
-                entry.1 = entry.1.min(t);
-            }
-        }
-        let mut v: Vec<_> = acc.into_iter().map(|(k, (s, t))| (k, s, t)).collect();
-        v.sort_by_key(|x| x.0);
-        out[ei] = v;
-    }
-    out
-}
 
 #[derive(PartialEq)]
 struct QItem(f64, EdgeIdx);

@@ -9,10 +9,11 @@
 //! [`RasterBackend`] (by default the scanline rasterizer: no anti-aliasing, deterministic and
 //! fast).
 
+use super::frame::{FrameInput, Renderer};
+use super::image::Image;
 use super::map::{Mat, RenderMap, N_LAYERS, N_MATS};
 use super::mesh::actor_dims;
 use super::raster::{Planes, RasterBackend, SV};
-use super::{FrameInput, Image, Renderer};
 use crate::error::{Error, Result};
 use crate::geom::Vec2;
 use crate::view::{ActorKind, LightColor};

@@ -5,10 +5,11 @@
 //! above the ground from a camera above it, so they are painted in layer order without depth;
 //! actors, signals, signs and props are then depth-tested among themselves.
 
+use super::frame::{FrameInput, Renderer};
+use super::image::Image;
 use super::map::{Mat, RenderMap, N_LAYERS, N_MATS};
 use super::mesh::{self, dot, Frame, Tri3};
 use super::raster::{fill_mask, Planes, RasterBackend, SV};
-use super::{FrameInput, Image, Renderer};
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 

@@ -4,8 +4,9 @@
 
 use super::bev::{EGO_OUTLINE, EGO_YELLOW, ROUTE_RED};
 use super::camera::Cam;
+use super::frame::{FrameInput, Renderer};
 use super::raster::{RasterBackend, SV};
-use super::{BevConfig, CameraConfig, FrameInput, RenderMap, Renderer};
+use super::{BevConfig, CameraConfig, RenderMap};
 use crate::geom::{Pose, Vec2};
 use crate::map::Network;
 use crate::view::{ActorKind, ActorView, LightColor, TrafficLightView};

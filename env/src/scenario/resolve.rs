@@ -2,10 +2,11 @@
 //! geometry against the map, with errors naming file, TOML field and value.
 
 use super::schema::*;
+pub use super::tables::{default_size, vclass_of};
 use crate::geom::{Polyline, Pose, Vec2};
 use crate::map::{EdgeFunction, EdgeIdx, LaneIdx, Network, VClass};
+use crate::vehicle_params::VehicleParams;
 use crate::view::{ActorKind, SignView};
-use crate::world::VehicleParams;
 use crate::{Error, Result};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -17,21 +18,8 @@ pub const DEFAULT_REFERENCE_SPEED_MPS: f64 = 5.56;
 pub const SNAP_DISTANCE_M: f64 = 6.0;
 /// Map-path prefix resolved against `SUMO_HOME`.
 pub const SUMO_PREFIX: &str = "sumo:";
-
-/// Default (length, width, height) in metres of each actor kind.
-pub fn default_size(kind: ActorKind) -> (f64, f64, f64) {
-    match kind {
-        ActorKind::Car => (4.5, 1.9, 1.5),
-        ActorKind::Bus => (12.0, 2.55, 3.2),
-        ActorKind::Truck => (8.0, 2.5, 3.5),
-        ActorKind::Motorcycle => (2.2, 0.8, 1.5),
-        ActorKind::Cyclist => (1.8, 0.6, 1.7),
-        ActorKind::Pedestrian => (0.5, 0.5, 1.75),
-        ActorKind::Cone => (0.4, 0.4, 0.7),
-        ActorKind::Barrier => (2.0, 0.5, 1.0),
-        ActorKind::StaticObject => (1.0, 1.0, 1.0),
-    }
-}
+/// `map = "builtin:town01"`: a map shipped with the package, from a scenario anywhere.
+pub const BUILTIN_PREFIX: &str = "builtin:";
 
 /// Default cruise speed of a scripted actor, m/s.
 pub fn default_speed_mps(kind: ActorKind) -> f64 {
@@ -61,18 +49,6 @@ fn default_color(kind: ActorKind, i: usize) -> [u8; 3] {
         ActorKind::Cone => [255, 120, 0],
         ActorKind::Barrier => [230, 60, 40],
         _ => PALETTE[i % PALETTE.len()],
-    }
-}
-
-/// SUMO vehicle class used to route an actor of this kind.
-pub fn vclass_of(kind: ActorKind) -> VClass {
-    match kind {
-        ActorKind::Bus => VClass::Bus,
-        ActorKind::Truck => VClass::Truck,
-        ActorKind::Motorcycle => VClass::Motorcycle,
-        ActorKind::Cyclist => VClass::Bicycle,
-        ActorKind::Pedestrian => VClass::Pedestrian,
-        _ => VClass::Passenger,
     }
 }
 
@@ -236,6 +212,8 @@ impl ScriptedPath {
     }
 }
 
+// One per actor, resolved once per scenario: the size difference does not matter.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone)]
 pub enum ActorMotion {
     /// Never moves (obstacles).
@@ -440,8 +418,47 @@ pub fn discover_sumo_home() -> Option<PathBuf> {
     (out.status.success() && p.is_dir()).then_some(p)
 }
 
+/// `builtin:NAME` maps: the folder holding the shipped maps (`NAME/NAME.net.xml`), registered
+/// once per process (the Python package registers the maps it ships when imported).
+static BUILTIN_MAPS: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+
+/// Registers the folder of the shipped maps for `builtin:NAME`; a second call is ignored
+/// (returns `false`) so every scenario of a process resolves against the same maps.
+pub fn set_builtin_maps_dir(dir: PathBuf) -> bool {
+    BUILTIN_MAPS.set(dir).is_ok()
+}
+
+fn resolve_builtin_map(file: &Path, map: &str, name: &str) -> Result<PathBuf> {
+    let dir = BUILTIN_MAPS.get().ok_or_else(|| {
+        Error::scenario(file, "map", map, "`builtin:` names the drivehierarchy package's shipped maps, and none are registered in this process (import drivehierarchy)")
+    })?;
+    let plain = !name.is_empty() && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+    let path = dir.join(name).join(format!("{name}.net.xml"));
+    if plain && path.is_file() {
+        return Ok(path);
+    }
+    let mut shipped: Vec<String> = std::fs::read_dir(dir)
+        .map(|entries| {
+            entries
+                .filter_map(|e| e.ok()?.file_name().into_string().ok())
+                .filter(|n| dir.join(n).join(format!("{n}.net.xml")).is_file())
+                .collect()
+        })
+        .unwrap_or_default();
+    shipped.sort();
+    Err(Error::scenario(
+        file,
+        "map",
+        map,
+        format!("no shipped map of this name (shipped: {})", shipped.join(", ")),
+    ))
+}
+
 /// Resolves the `map` value of a scenario file to a path.
 pub fn resolve_map_path(file: &Path, map: &str, sumo_home: Option<&Path>) -> Result<PathBuf> {
+    if let Some(name) = map.strip_prefix(BUILTIN_PREFIX) {
+        return resolve_builtin_map(file, map, name);
+    }
     if let Some(rest) = map.strip_prefix(SUMO_PREFIX) {
         let home = match sumo_home {
             Some(h) => h.to_path_buf(),

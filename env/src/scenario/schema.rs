@@ -4,31 +4,15 @@
 //! trigger by time or by distance) are flat optional fields checked by the resolver, so errors
 //! can say precisely which field is wrong instead of "no variant matched".
 
+pub use super::tables::{CATEGORIES, SCENARIO_VERSION};
+use crate::vehicle_params::VehicleParams;
 use crate::view::{ActorKind, SignKind};
-use crate::world::VehicleParams;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-/// Highest schema version this build reads.
-pub const SCENARIO_VERSION: u32 = 1;
-
-/// The ten R4 categories of PROTOCOL.md §2.6, as written in `category` and used as folder names.
-pub const CATEGORIES: [&str; 10] = [
-    "01_pedestrian",
-    "02_obstacles",
-    "03_turning",
-    "04_intersection",
-    "05_t_intersection",
-    "06_traffic_flow",
-    "07_sudden_brake",
-    "08_merging",
-    "09_yielding",
-    "10_roundabout",
-];
-
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
-#[schemars(transform = crate::scenario::json_schema::file_constraints)]
+#[schemars(transform = crate::scenario::schema_rules::file_constraints)]
 pub struct ScenarioFile {
     pub version: u32,
     pub id: String,
@@ -37,7 +21,8 @@ pub struct ScenarioFile {
     pub category: String,
     #[serde(default)]
     pub description: String,
-    /// Path relative to the scenario file, or `sumo:<path under SUMO_HOME>`.
+    /// Path relative to the scenario file, `sumo:<path under SUMO_HOME>`, or `builtin:<name>`
+    /// for a map shipped with the package (`builtin:town01`, `builtin:town02`, ...).
     pub map: String,
     /// T_ref: the ego's reference duration (efficiency term only).
     #[serde(default)]
@@ -71,7 +56,7 @@ pub struct ScenarioFile {
 /// `yaw_deg` (counter-clockwise from east) overrides the lane heading.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
-#[schemars(transform = crate::scenario::json_schema::place_alternatives)]
+#[schemars(transform = crate::scenario::schema_rules::place_alternatives)]
 pub struct PlaceSpec {
     #[serde(default)]
     pub lane: Option<String>,
@@ -89,7 +74,7 @@ pub struct PlaceSpec {
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
-#[schemars(transform = crate::scenario::json_schema::ego_alternatives)]
+#[schemars(transform = crate::scenario::schema_rules::ego_alternatives)]
 pub struct EgoSpec {
     #[serde(default)]
     pub start: Option<PlaceSpec>,
@@ -147,7 +132,7 @@ pub enum AtEndSpec {
 /// One point of a waypoint path; `speed_mps` is the speed on the leg that arrives here.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
-#[schemars(transform = crate::scenario::json_schema::place_alternatives)]
+#[schemars(transform = crate::scenario::schema_rules::place_alternatives)]
 pub struct WaypointSpec {
     #[serde(default)]
     pub lane: Option<String>,
@@ -167,7 +152,7 @@ pub struct WaypointSpec {
 /// lanes inserted automatically), cut to [`start_s`, `end_s`] along the route.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
-#[schemars(transform = crate::scenario::json_schema::route_alternatives)]
+#[schemars(transform = crate::scenario::schema_rules::route_alternatives)]
 pub struct RouteSpec {
     #[serde(default)]
     pub edges: Option<Vec<String>>,
@@ -188,7 +173,7 @@ pub struct RouteSpec {
 /// What the `of` of a distance trigger refers to.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(untagged)]
-#[schemars(transform = crate::scenario::json_schema::of_alternatives)]
+#[schemars(transform = crate::scenario::schema_rules::of_alternatives)]
 pub enum OfSpec {
     Point([f64; 2]),
     /// Only `"actor_self"`: the actor's own start position.
@@ -199,7 +184,7 @@ pub enum OfSpec {
 /// Start trigger: exactly one of `time_s` or `ego_within_m` (+ `of`, default `"actor_self"`).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
-#[schemars(transform = crate::scenario::json_schema::trigger_alternatives)]
+#[schemars(transform = crate::scenario::schema_rules::trigger_alternatives)]
 pub struct TriggerSpec {
     #[serde(default)]
     pub time_s: Option<f64>,
@@ -260,7 +245,7 @@ pub struct LightPhaseSpec {
 /// (+ `phase_elapsed_s`) sets where it is at t = 0, `phases` replaces it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
-#[schemars(transform = crate::scenario::json_schema::light_alternatives)]
+#[schemars(transform = crate::scenario::schema_rules::light_alternatives)]
 pub struct LightOverrideSpec {
     pub tls: String,
     #[serde(default)]
@@ -282,7 +267,7 @@ pub struct LightOverrideSpec {
 /// (`after` + `event`, `delay_s`).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
-#[schemars(transform = crate::scenario::json_schema::brake_alternatives)]
+#[schemars(transform = crate::scenario::schema_rules::brake_alternatives)]
 pub struct BrakeSpec {
     #[serde(default)]
     pub at_s: Option<f64>,
@@ -333,7 +318,7 @@ pub struct BrakeSpec {
 /// `until_s` of its path, after the meet point, or when its brake event begins.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
-#[schemars(transform = crate::scenario::json_schema::pace_alternatives)]
+#[schemars(transform = crate::scenario::schema_rules::pace_alternatives)]
 pub struct PaceSpec {
     /// Time part of the gap: seconds at the ego's speed.
     #[serde(default)]
@@ -360,7 +345,7 @@ pub struct PaceSpec {
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
-#[schemars(transform = crate::scenario::json_schema::actor_alternatives)]
+#[schemars(transform = crate::scenario::schema_rules::actor_alternatives)]
 pub struct ActorSpec {
     #[serde(default)]
     pub name: Option<String>,

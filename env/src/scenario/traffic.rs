@@ -5,9 +5,11 @@
 //! the native model ([`crate::world::idm`]) spawns them itself. Random trips are drawn here with
 //! a seeded generator, so both modes see the same vehicles, routes and departure places.
 
+/// Re-exported at its old path (moved to [`super::sumo_routes`], which sits above `resolve`).
+pub use super::sumo_routes::mirror_specs;
+use super::tables::{default_size, vclass_of, LANE_NAMES, SPEED_NAMES};
 use crate::geom::Polyline;
 use crate::map::{EdgeFunction, EdgeIdx, Network, VClass};
-use crate::scenario::resolve::vclass_of;
 use crate::view::ActorKind;
 use crate::{Error, Result};
 use quick_xml::events::Event;
@@ -15,7 +17,6 @@ use quick_xml::Reader;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// The shipped vehicle-type file (`scenarios/traffic/vtypes.add.xml`), used when a scenario
@@ -62,7 +63,7 @@ impl TrafficMode {
 /// `depart_lane`: a lane index or one of SUMO's names.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(untagged)]
-#[schemars(transform = crate::scenario::json_schema::lane_names)]
+#[schemars(transform = crate::scenario::schema_rules::lane_names)]
 pub enum LaneChoice {
     Index(u32),
     Named(String),
@@ -71,14 +72,11 @@ pub enum LaneChoice {
 /// `depart_speed`: m/s or one of SUMO's names.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(untagged)]
-#[schemars(transform = crate::scenario::json_schema::speed_names)]
+#[schemars(transform = crate::scenario::schema_rules::speed_names)]
 pub enum SpeedChoice {
     Value(f64),
     Named(String),
 }
-
-pub(crate) const LANE_NAMES: [&str; 4] = ["best", "random", "free", "first"];
-pub(crate) const SPEED_NAMES: [&str; 3] = ["max", "desired", "random"];
 
 /// The `[traffic]` table as written.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -129,7 +127,7 @@ pub struct TrafficVehicleSpec {
 
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
-#[schemars(transform = crate::scenario::json_schema::flow_alternatives)]
+#[schemars(transform = crate::scenario::schema_rules::flow_alternatives)]
 pub struct TrafficFlowSpec {
     #[serde(default)]
     pub id: Option<String>,
@@ -361,7 +359,7 @@ pub fn parse_vtypes(origin: &str, text: &str) -> Result<Vec<VType>> {
                 .ok_or_else(|| err(format!("vType \"{id}\": attribute vClass = \"{v}\": unknown class")))?,
         };
         let kind = kind_of_vclass(vclass);
-        let (dl, dw, dh) = crate::scenario::default_size(kind);
+        let (dl, dw, dh) = default_size(kind);
         if out.iter().any(|t| t.id == id) {
             return Err(err(format!("vType \"{id}\" defined twice")));
         }
@@ -856,139 +854,6 @@ impl TrafficDemand {
         }
         out
     }
-
-    /// The SUMO route file of one episode (times shifted so SUMO time 0 = episode −warmup_s):
-    /// every vehicle type of the type file, the ego's and the mirrored actors' types, the ego
-    /// route, explicit vehicles, random trips and flows sorted by departure (vary the demand
-    /// first with [`TrafficDemand::varied`]).
-    pub fn sumo_routes_xml(
-        &self,
-        map: &Network,
-        seed: u64,
-        ego: &crate::scenario::ResolvedEgo,
-        mirrors: &[MirrorSpec],
-    ) -> String {
-        let mut s = String::with_capacity(4096);
-        s.push_str("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<routes>\n");
-        for t in &self.vtypes {
-            s.push_str("    <vType");
-            for (k, v) in &t.attrs {
-                let _ = write!(s, " {k}=\"{}\"", xml_escape(v));
-            }
-            s.push_str("/>\n");
-        }
-        let p = &ego.params;
-        let _ = writeln!(
-            s,
-            "    <vType id=\"dh_ego\" vClass=\"passenger\" length=\"{}\" width=\"{}\" height=\"{}\" minGap=\"0\"/>",
-            p.length_m, p.width_m, p.height_m
-        );
-        for m in mirrors {
-            let _ = writeln!(
-                s,
-                "    <vType id=\"dh_actor_{}\" vClass=\"{}\" length=\"{}\" width=\"{}\" height=\"{}\" minGap=\"0\"/>",
-                m.id,
-                if m.kind.is_static() { "passenger" } else { actor_vclass(m.kind).sumo_name() },
-                m.length_m,
-                m.width_m,
-                m.height_m
-            );
-        }
-        let _ =
-            writeln!(s, "    <route id=\"{SUMO_EGO_ROUTE}\" edges=\"{}\"/>", edge_ids(map, &ego.route_edges));
-        let mut entries: Vec<(f64, String)> = Vec::new();
-        let shift = self.warmup_s;
-        let fmt_lane = |l: &LaneChoice| match l {
-            LaneChoice::Index(i) => i.to_string(),
-            LaneChoice::Named(n) => n.clone(),
-        };
-        let fmt_speed = |v: &SpeedChoice| match v {
-            SpeedChoice::Value(x) => format!("{x}"),
-            SpeedChoice::Named(n) => n.clone(),
-        };
-        let trips = self.random_trips(map, seed, ego.start.pos, 20.0);
-        for v in self.vehicles.iter().chain(&trips) {
-            let depart = v.depart_s + shift;
-            let mut pos = v.depart_pos_m.map(|p| format!(" departPos=\"{p:.3}\"")).unwrap_or_default();
-            if let Some(f) = v.speed_factor {
-                let _ = write!(pos, " speedFactor=\"{f}\"");
-            }
-            entries.push((
-                depart,
-                format!(
-                    "    <vehicle id=\"{}\" type=\"{}\" depart=\"{depart:.2}\" departLane=\"{}\" departSpeed=\"{}\"{pos}>\n        <route edges=\"{}\"/>\n    </vehicle>\n",
-                    xml_escape(&v.id),
-                    xml_escape(&self.vtypes[v.vtype].id),
-                    fmt_lane(&v.depart_lane),
-                    fmt_speed(&v.depart_speed),
-                    edge_ids(map, &v.edges)
-                ),
-            ));
-        }
-        for f in &self.flows {
-            let (b, e) = (f.begin_s + shift, f.end_s + shift);
-            let rate = match f.rate {
-                FlowRate::PerHour(v) => format!("vehsPerHour=\"{v}\""),
-                FlowRate::Probability(p) => format!("probability=\"{p}\""),
-            };
-            // SUMO takes `end` or `number`, not both: a capped flow gets the departures that
-            // fall before `end` as its `number` (as the native model counts them).
-            let end_or_number = match (f.number, f.rate) {
-                (Some(n), FlowRate::PerHour(v)) => {
-                    let before_end = ((f.end_s - f.begin_s) * v / 3600.0 - 1e-9).ceil().max(1.0) as u32;
-                    format!("number=\"{}\"", n.min(before_end))
-                }
-                _ => format!("end=\"{e:.2}\""),
-            };
-            let mut pos = f.depart_pos_m.map(|p| format!(" departPos=\"{p:.3}\"")).unwrap_or_default();
-            if let Some(sf) = f.speed_factor {
-                let _ = write!(pos, " speedFactor=\"{sf}\"");
-            }
-            entries.push((
-                b,
-                format!(
-                    "    <flow id=\"{}\" type=\"{}\" begin=\"{b:.2}\" {end_or_number} {rate} departLane=\"{}\" departSpeed=\"{}\"{pos}>\n        <route edges=\"{}\"/>\n    </flow>\n",
-                    xml_escape(&f.id),
-                    xml_escape(&self.vtypes[f.vtype].id),
-                    fmt_lane(&f.depart_lane),
-                    fmt_speed(&f.depart_speed),
-                    edge_ids(map, &f.edges)
-                ),
-            ));
-        }
-        entries.sort_by(|a, b| a.0.total_cmp(&b.0));
-        for (_, e) in entries {
-            s.push_str(&e);
-        }
-        s.push_str("</routes>\n");
-        s
-    }
-}
-
-fn edge_ids(map: &Network, edges: &[EdgeIdx]) -> String {
-    edges.iter().map(|&e| xml_escape(&map.edges[e].id)).collect::<Vec<_>>().join(" ")
-}
-
-fn xml_escape(s: &str) -> String {
-    s.replace('&', "&amp;").replace('"', "&quot;").replace('<', "&lt;").replace('>', "&gt;")
-}
-
-/// The scenario actors SUMO should see: everything but pedestrians (SUMO vehicles treat them
-/// as parked or moving vehicles on the lane they stand on).
-pub fn mirror_specs(actors: &[crate::scenario::ResolvedActor]) -> Vec<MirrorSpec> {
-    actors
-        .iter()
-        .enumerate()
-        .filter(|(_, a)| a.kind != ActorKind::Pedestrian)
-        .filter(|(_, a)| !matches!(a.motion, crate::scenario::ActorMotion::External { .. }))
-        .map(|(i, a)| MirrorSpec {
-            id: i as u32 + 1,
-            kind: a.kind,
-            length_m: a.length_m,
-            width_m: a.width_m,
-            height_m: a.height_m,
-        })
-        .collect()
 }
 
 /// `vclass_of` re-exported for the traffic models (kind of a scenario actor → SUMO class).

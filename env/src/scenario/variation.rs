@@ -192,7 +192,7 @@ impl ResolvedScenario {
                 }
                 ActorMotion::Static { pose } => {
                     let mut rng = seeded_rng(seed, STREAM_OBSTACLE + i as u64);
-                    pose.pos = pose.pos + Vec2::from_angle(pose.yaw) * (v.obstacle_m * sym(&mut rng));
+                    pose.pos += Vec2::from_angle(pose.yaw) * (v.obstacle_m * sym(&mut rng));
                 }
                 ActorMotion::External { .. } => {}
             }

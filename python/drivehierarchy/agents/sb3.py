@@ -4,6 +4,10 @@
 The archive carries the `WrapperConfig` the policy was trained with, and the agent applies the
 same observation and action mapping to the plain env, so the policy is scored by the same
 harness (and the same actuation bridge) as the expert and the VLMs.
+
+Security: loading an archive unpickles Python objects from it (Stable-Baselines3's `load`), which
+can execute arbitrary code. Only load model files you trust (ones you trained, or from a source
+you would run code from).
 """
 
 from __future__ import annotations

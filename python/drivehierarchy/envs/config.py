@@ -7,34 +7,49 @@ import json
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+from drivehierarchy import _core
 from drivehierarchy._core import ConfigError
 
 ActionMode = Literal["decision", "raw"]
+
+# Every default the Rust core also has is read from it (`SimConfig::default()`): one definition.
+# tests/envs/test_config_parity.py checks that the dataclasses below agree with it field by field.
+_RUST_DEFAULTS: dict[str, Any] = json.loads(_core.default_sim_config())
+
+
+def _rust_default(*keys: str) -> Any:
+    value: Any = _RUST_DEFAULTS
+    for key in keys:
+        value = value[key]
+    return value
+
+
+_DEFAULT_ACTION_MODE: ActionMode = _rust_default("action_mode")
 
 
 @dataclass(frozen=True)
 class CameraConfig:
     """Pinhole front camera; defaults are the protocol's (PROTOCOL §2.1)."""
 
-    width: int = 800
-    height: int = 450
-    fov_deg: float = 100.0
-    mount_forward_m: float = 1.5
-    mount_left_m: float = 0.0
-    mount_height_m: float = 2.4
-    pitch_deg: float = 5.0
-    yaw_deg: float = 0.0
-    supersample: int = 1
-    draw_ego: bool = False
-    draw_distance_m: float = 200.0
+    width: int = _rust_default("front", "width")
+    height: int = _rust_default("front", "height")
+    fov_deg: float = _rust_default("front", "fov_deg")
+    mount_forward_m: float = _rust_default("front", "mount_forward_m")
+    mount_left_m: float = _rust_default("front", "mount_left_m")
+    mount_height_m: float = _rust_default("front", "mount_height_m")
+    pitch_deg: float = _rust_default("front", "pitch_deg")
+    yaw_deg: float = _rust_default("front", "yaw_deg")
+    supersample: int = _rust_default("front", "supersample")
+    draw_ego: bool = _rust_default("front", "draw_ego")
+    draw_distance_m: float = _rust_default("front", "draw_distance_m")
 
 
 @dataclass(frozen=True)
 class BevConfig:
     """Top-down view centred on the ego, forward up; defaults are the protocol's 800×800 at 8 px/m."""
 
-    size_px: int = 800
-    px_per_m: float = 8.0
+    size_px: int = _rust_default("bev", "size_px")
+    px_per_m: float = _rust_default("bev", "px_per_m")
 
 
 @dataclass(frozen=True)
@@ -47,14 +62,14 @@ class R4Config:
     """
 
     scenario: str | None = None
-    action_mode: ActionMode = "decision"
-    decision_interval_ticks: int = 5
+    action_mode: ActionMode = _DEFAULT_ACTION_MODE
+    decision_interval_ticks: int = _rust_default("decision_interval_ticks")
     # The original applies zero control on ticks 1–4 and first asks at tick 5 with the state
     # after tick 4: reset plays these ticks. 0 asks at t = 0.
-    warmup_ticks: int = 4
+    warmup_ticks: int = _rust_default("warmup_ticks")
     front: CameraConfig | None = field(default_factory=CameraConfig)
     bev: BevConfig | None = field(default_factory=BevConfig)
-    prompt: bool = True
+    prompt: bool = _rust_default("prompt")
     # Background traffic: "sumo" | "native" | "none"; None = the scenario's `[traffic]` mode.
     traffic: str | None = None
     # SUMO mode's backend: "native" (libsumo's C++ API driven from Rust, no Python per tick),

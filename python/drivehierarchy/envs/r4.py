@@ -25,7 +25,7 @@ import numpy as np
 from gymnasium import spaces
 
 from drivehierarchy import _core
-from drivehierarchy._core import ConfigError
+from drivehierarchy._core import ConfigError, SimulationError
 from drivehierarchy.envs.config import R4Config
 from drivehierarchy.envs.traffic import SumoTraffic, resolve_traffic_mode
 from drivehierarchy.envs.traffic.native import check_python_sumo_free, make_sumo_traffic
@@ -39,7 +39,45 @@ STATE_BOUND = 1.0e6
 PROMPT_CHARSET = frozenset(string.printable)
 
 
+class EpisodeNotStarted(SimulationError, gym.error.ResetNeeded):
+    """A step or render on an env with no running episode: Gymnasium's `ResetNeeded`, and a
+    `SimulationError` like every other failure of the world."""
+
+
 class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
+    """The DriveHierarchy R4 closed-loop rank: one scenario of the suite (or any scenario file).
+
+    **Observation** (`spaces.Dict`; keys present as configured):
+
+    - `front`: `Box(0, 255, (H, W, 3), uint8)`, the protocol's front camera (default 450×800);
+      `front=None` drops it.
+    - `bev`: `Box(0, 255, (S, S, 3), uint8)`, bird's-eye view with the local route (default
+      800×800); `bev=None` drops it.
+    - `prompt`: `Text`, the exact route prompt the protocol sends a VLM at each decision.
+    - `state`: `Box(float32)`, privileged ego/route scalars named by `STATE_FIELDS`.
+
+    **Action** (`action_mode`): `"decision"` (default) takes `[steer, target_speed_mps]` in
+    `[-1, 1] × [0, 30]` (steer < 0 turns left), a raw VLM reply `str` (parsed in Rust by the
+    protocol's parser) or `None` (no reply; the previous control is held and counted);
+    `"raw"` takes `[throttle, brake, steer]` in `[0, 1] × [0, 1] × [-1, 1]`.
+
+    **Arguments**: `scenario` (a suite id such as `"07_sudden_brake/town01_07_lead_brakes"`,
+    or a path to a scenario file), `config` (an `R4Config` or a dict of its fields),
+    `render_mode="rgb_array"` (`render()` returns the front camera, read-only), and any
+    `R4Config` field as a keyword (`front=None`, `traffic="native"`, `action_mode="raw"`, …).
+    `reset(options={"scenario": ...})` switches the scenario.
+
+    **Episode end**: `terminated` is True on any of the protocol's terminations — destination
+    reached, collision, off-road timeout (31st consecutive off-road tick), route deviation,
+    blocked, or the scenario timeout at 2 × the scenario duration (`info["time_limit_s"]`,
+    `info["time_left_s"]`). `truncated` is always False: the protocol's own timeout ends every
+    episode, so no external time limit is needed. Rewards sum to S_R4 / 100.
+
+    Copies (`copy.deepcopy`, pickle) keep the scenario and config but no episode: call `reset()`
+    before stepping them (stepping raises `gymnasium.error.ResetNeeded`). After `close()` every
+    call raises `gymnasium.error.ClosedEnvironmentError`.
+    """
+
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 4}
 
     def __init__(
@@ -63,6 +101,8 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         self._sim: Any = None
         self._scenario_path: str | None = None
         self._sumo: SumoTraffic | _core.NativeSumo | None = None
+        self._closed = False
+        self._live = False  # an episode is running (reset since the last load/copy)
         self._load(config.scenario)
 
         obs: dict[str, spaces.Space[Any]] = {}
@@ -93,6 +133,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         path = resolve_scenario(scenario)
         if self._sim is not None and path == self._scenario_path:
             return
+        self._live = False
         self._sim = _core.Sim(path, self.config.to_json(), sumo_home())
         self._scenario_path = path
         self._configure_traffic()
@@ -111,6 +152,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, Any], dict[str, Any]]:
+        self._check_open("reset")
         super().reset(seed=seed)
         options = dict(options or {})
         scenario = options.pop("scenario", None)
@@ -130,11 +172,13 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         variation = int(seed) if seed is not None else world_seed
         obs, info = self._sim.reset(world_seed, variation)
         self._last_frame = None
+        self._live = True
         return self._shape_obs(obs), info
 
     def step(self, action: Any) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
         if action is None or isinstance(action, str):
             return self.step_reply(action)
+        self._check_live("step")
         arr = np.asarray(action, dtype=np.float64)
         expected = self.action_space.shape
         if arr.shape != expected:
@@ -159,25 +203,47 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
             )
         if reply is not None and not isinstance(reply, str):
             raise ConfigError(f"config `action` = {reply!r}: a reply must be a str or None")
+        self._check_live("step_reply")
         obs, reward, terminated, truncated, info = self._sim.step_reply(reply)
         self._last_frame = None
         return self._shape_obs(obs), float(reward), bool(terminated), bool(truncated), info
 
     def decision_log(self) -> list[dict[str, Any]]:
         """Every decision of the episode: decision, tick, raw reply, parsed action, failure, control."""
+        self._check_open("decision_log")
         return self._sim.decision_log()
 
     def render(self) -> np.ndarray | None:  # type: ignore[override]
         if self.render_mode != "rgb_array":
             return None
+        self._check_live("render")
         if self._last_frame is None:
-            self._last_frame = self._sim.render("front")
+            frame = self._sim.render("front")
+            # Read-only: the frame is cached until the next step, so a caller's in-place edit
+            # would otherwise corrupt what the next render() call returns.
+            frame.setflags(write=False)
+            self._last_frame = frame
         return self._last_frame
 
     def close(self) -> None:
         self._close_traffic()
         self._sim = None
-        self._scenario_path = None
+        self._closed = True
+        self._live = False
+
+    def _check_open(self, what: str) -> None:
+        if self._closed:
+            raise gym.error.ClosedEnvironmentError(
+                f"{what}() on a closed DriveHierarchy-R4 env: make a new env (gym.make) instead"
+            )
+
+    def _check_live(self, what: str) -> None:
+        self._check_open(what)
+        if not self._live:
+            raise EpisodeNotStarted(
+                f"{what}() before reset(): this env has no running episode (a new, copied or "
+                "unpickled env starts without one; call reset() first)"
+            )
 
     # -- helpers ---------------------------------------------------------------------------
     def _shape_obs(self, raw: dict[str, Any]) -> dict[str, Any]:
@@ -188,10 +254,12 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
 
     def expert_action(self) -> np.ndarray:
         """The privileged autopilot's action for the current state, in this env's action mode."""
+        self._check_open("expert_action")
         return np.asarray(self._sim.expert_action(), dtype=np.float32)
 
     def score(self) -> dict[str, Any]:
         """The scene score record so far (final once the episode has terminated)."""
+        self._check_open("score")
         return self._sim.score()
 
     # -- background traffic (envs/traffic) -----------------------------------------------------
@@ -226,11 +294,16 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
             self._sumo = None
 
     def __getstate__(self) -> dict[str, Any]:
-        # Pickled by config (+ seed on the next reset); the Rust world is rebuilt on load.
-        return {"config": self.config, "render_mode": self.render_mode}
+        # Pickled by config and the loaded scenario (+ seed on the next reset); the Rust world is
+        # rebuilt on load, without an episode (Gymnasium's ResetNeeded until reset()).
+        if self._closed:
+            raise gym.error.ClosedEnvironmentError("cannot copy or pickle a closed DriveHierarchy-R4 env")
+        return {"config": self.config, "render_mode": self.render_mode, "scenario": self._scenario_path}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__init__(config=state["config"], render_mode=state["render_mode"])  # type: ignore[misc]
+        self.__init__(  # type: ignore[misc]
+            scenario=state.get("scenario"), config=state["config"], render_mode=state["render_mode"]
+        )
 
 
 def _shallow(config: R4Config) -> dict[str, Any]:

@@ -39,15 +39,18 @@ from typing import Any
 
 @dataclass(frozen=True)
 class Fault:
-    """A scripted failure. kinds: `http` (with status), `malformed_json`, `empty_choices`,
-    `no_content` (a choice without a message), `disconnect` (close the socket, no reply)."""
+    """A scripted failure. kinds: `http` (with status; a 429 carries `Retry-After: retry_after_s`),
+    `malformed_json`, `empty_choices`, `no_content` (a choice without a message), `disconnect`
+    (close the socket, no reply), `truncated` (headers promise the whole body, half is sent, then
+    the socket closes)."""
 
     kind: str
     status: int = 500
+    retry_after_s: float = 0.0
 
     @classmethod
-    def http(cls, status: int = 500) -> Fault:
-        return cls("http", status)
+    def http(cls, status: int = 500, retry_after_s: float = 0.0) -> Fault:
+        return cls("http", status, retry_after_s)
 
     @classmethod
     def malformed_json(cls) -> Fault:
@@ -64,6 +67,10 @@ class Fault:
     @classmethod
     def disconnect(cls) -> Fault:
         return cls("disconnect")
+
+    @classmethod
+    def truncated(cls) -> Fault:
+        return cls("truncated")
 
 
 @dataclass(frozen=True)
@@ -427,7 +434,7 @@ def _make_handler(owner: ScriptedOpenAIServer) -> type[BaseHTTPRequestHandler]:
                 self.send_header("Content-Type", "application/json")
                 self.send_header("Content-Length", str(len(payload)))
                 if headers_retry:
-                    self.send_header("Retry-After", "0")
+                    self.send_header("Retry-After", f"{outcome.retry_after_s:g}")
                 self.end_headers()
                 self.wfile.write(payload)
             elif outcome.kind == "malformed_json":
@@ -437,6 +444,16 @@ def _make_handler(owner: ScriptedOpenAIServer) -> type[BaseHTTPRequestHandler]:
             elif outcome.kind == "no_content":
                 self._send_json(200, {"id": "chatcmpl-x", "choices": [{"index": 0, "finish_reason": "stop"}]})
             elif outcome.kind == "disconnect":
+                self.close_connection = True
+                self.connection.close()
+            elif outcome.kind == "truncated":
+                payload = json.dumps(owner.completion_body(req, "steer: 0.0\ntarget_speed_mps: 5.0")).encode()
+                self.send_response(200)
+                self.send_header("Content-Type", "application/json")
+                self.send_header("Content-Length", str(len(payload)))
+                self.end_headers()
+                self.wfile.write(payload[: len(payload) // 2])
+                self.wfile.flush()
                 self.close_connection = True
                 self.connection.close()
             else:

@@ -12,6 +12,8 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
+from drivehierarchy import _core
+
 # Answer kinds, spelled as in the original catalog's `task` field.
 YES_NO = "yes_no"
 NUMERIC = "numeric"
@@ -21,46 +23,43 @@ TEXT = "text"
 SEQUENCE_ORDER = "sequence_order"
 ANSWER_KINDS = (YES_NO, NUMERIC, MULTI_CHOICE, BBOX, TEXT, SEQUENCE_ORDER)
 
+# The task table, ranks and frozen weights are the Rust core's (`dh-benchmark`'s `TASKS`), read
+# once here so every Python module shares the one definition. A record's answer kind follows
+# from the task's scorer (numeric count and distance tasks are both `numeric` in the catalog).
+_KIND_OF_SCORER: dict[str, str] = {
+    "yes_no": YES_NO,
+    "numeric_count": NUMERIC,
+    "numeric_distance": NUMERIC,
+    "multi_choice": MULTI_CHOICE,
+    "bbox": BBOX,
+    "text_lingo_judge": TEXT,
+    "sequence_order": SEQUENCE_ORDER,
+}
+
+
+def _task_table() -> tuple[tuple[str, str, str, str], ...]:
+    rows = []
+    for t in _core.openloop_tasks():
+        kind = _KIND_OF_SCORER.get(t["scorer"])
+        if kind is None:
+            raise RuntimeError(
+                f"open-loop task {t['id']}: scorer {t['scorer']!r} has no answer kind in "
+                f"records._KIND_OF_SCORER (known: {sorted(_KIND_OF_SCORER)})"
+            )
+        rows.append((t["id"], t["stem"], kind, t["rank"]))
+    return tuple(rows)
+
+
 # (task id, file stem, answer kind, rank) of the 14 released tasks, in the paper's column order.
-TASKS: tuple[tuple[str, str, str, str], ...] = (
-    ("R1_1_A", "R1_1_A_Existence", YES_NO, "R1"),
-    ("R1_1_B", "R1_1_B_Counting", NUMERIC, "R1"),
-    ("R1_1_C", "R1_1_C_State_Attribute", MULTI_CHOICE, "R1"),
-    ("R1_2_A", "R1_2_A_Nearest_Object", NUMERIC, "R1"),
-    ("R1_2_B", "R1_2_B_Certain_Object", NUMERIC, "R1"),
-    ("R1_2_C", "R1_2_C_Distance_Bucket", NUMERIC, "R1"),
-    ("R1_3", "R1_3_Location_Questions", BBOX, "R1"),
-    ("R1_4", "R1_4_Situation_Description", TEXT, "R1"),
-    ("R2_1", "R2_1_Multi_view_Memory", NUMERIC, "R2"),
-    ("R2_2_A", "R2_2_A_Temporal_Counting", NUMERIC, "R2"),
-    ("R2_2_B", "R2_2_B_Temporal_Status_Recognition", MULTI_CHOICE, "R2"),
-    ("R2_3", "R2_3_Spatial_Relations", MULTI_CHOICE, "R2"),
-    ("R3_1", "R3_1_Outcome_Prediction", MULTI_CHOICE, "R3"),
-    ("R3_2", "R3_2_Sequential_Planning", SEQUENCE_ORDER, "R3"),
-)
+TASKS: tuple[tuple[str, str, str, str], ...] = _task_table()
 TASK_IDS: tuple[str, ...] = tuple(t[0] for t in TASKS)
 TASK_FILE_STEM: dict[str, str] = {t[0]: t[1] for t in TASKS}
 TASK_KIND: dict[str, str] = {t[0]: t[2] for t in TASKS}
 TASK_RANK: dict[str, str] = {t[0]: t[3] for t in TASKS}
-RANKS: tuple[str, ...] = ("R1", "R2", "R3")
+RANKS: tuple[str, ...] = tuple(dict.fromkeys(t[3] for t in TASKS))
 
 # Frozen headline weights (paper Table 1, PROTOCOL §1.4).
-FROZEN_WEIGHTS: dict[str, float] = {
-    "R1_1_A": 0.030,
-    "R1_1_B": 0.027,
-    "R1_1_C": 0.056,
-    "R1_2_A": 0.035,
-    "R1_2_B": 0.036,
-    "R1_2_C": 0.029,
-    "R1_3": 0.056,
-    "R1_4": 0.031,
-    "R2_1": 0.064,
-    "R2_2_A": 0.079,
-    "R2_2_B": 0.067,
-    "R2_3": 0.090,
-    "R3_1": 0.233,
-    "R3_2": 0.167,
-}
+FROZEN_WEIGHTS: dict[str, float] = dict(_core.openloop_frozen_weights())
 
 _TASK_ID_RE = re.compile(r"^(R\d_\d(?:_[A-Z](?=_|$))?)")
 

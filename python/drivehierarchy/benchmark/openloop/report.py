@@ -15,7 +15,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from drivehierarchy import ConfigError
+from drivehierarchy import ConfigError, _core
 
 from .records import FROZEN_WEIGHTS, RANKS, TASK_IDS, TASK_RANK, task_id_from_name
 
@@ -195,32 +195,10 @@ def weighted_score(
     return sum(w * scores[t] for t, w in weights.items())
 
 
-def _ranks(values: Sequence[float]) -> list[float]:
-    order = sorted(range(len(values)), key=lambda i: values[i])
-    ranks = [0.0] * len(values)
-    i = 0
-    while i < len(order):
-        j = i
-        while j + 1 < len(order) and values[order[j + 1]] == values[order[i]]:
-            j += 1
-        for k in range(i, j + 1):
-            ranks[order[k]] = (i + j) / 2.0 + 1.0  # ties share their mean rank
-        i = j + 1
-    return ranks
-
-
 def spearman(x: Sequence[float], y: Sequence[float]) -> float:
-    """Spearman's ρ (Pearson of average ranks); NaN when fewer than 2 pairs or a constant side."""
-    if len(x) != len(y) or len(x) < 2:
-        return float("nan")
-    rx, ry = _ranks(x), _ranks(y)
-    mx, my = sum(rx) / len(rx), sum(ry) / len(ry)
-    sxy = sum((a - mx) * (b - my) for a, b in zip(rx, ry, strict=True))
-    sxx = sum((a - mx) ** 2 for a in rx)
-    syy = sum((b - my) ** 2 for b in ry)
-    if sxx == 0 or syy == 0:
-        return float("nan")
-    return sxy / math.sqrt(sxx * syy)
+    """Spearman's ρ (Pearson of average ranks, ties share their mean rank); NaN when fewer than 2
+    pairs or a constant side. The calibration's own (`dh-benchmark`), so both agree."""
+    return _core.openloop_spearman([float(v) for v in x], [float(v) for v in y])
 
 
 def correlation_matrix(columns: Mapping[str, Sequence[float]]) -> dict[str, dict[str, float]]:

@@ -18,17 +18,17 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import subprocess
 import sys
 import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from dataclasses import asdict, dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import IO, Any
 
 from drivehierarchy import ConfigError
+from drivehierarchy._manifest import git_commit
 
 from .catalog import (
     Catalog,
@@ -47,7 +47,7 @@ MANIFEST_VERSION = 1
 
 
 def utc_now() -> str:
-    return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
+    return datetime.now(UTC).isoformat(timespec="milliseconds")
 
 
 @dataclass(frozen=True)
@@ -205,18 +205,6 @@ class _Appender:
 
 
 # --- manifest ------------------------------------------------------------------------------------
-
-
-def git_commit() -> str | None:
-    """Commit of the source tree this package runs from, when it is a git checkout."""
-    here = Path(__file__).resolve().parent
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5, check=False
-        )
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return out.stdout.strip() or None if out.returncode == 0 else None
 
 
 def _write_json_atomic(path: Path, obj: Any) -> None:

@@ -34,7 +34,7 @@ import json
 import os
 import warnings
 from collections.abc import Mapping
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -227,7 +227,7 @@ def score_run(
     per_record_path = out_dir / "per_record.jsonl"
     params = _core.openloop_score_params()
     payload: dict[str, Any] = {
-        "created_at": datetime.now(timezone.utc).isoformat(),
+        "created_at": datetime.now(UTC).isoformat(),
         "result_dir": str(run),
         "output_file": str(output_path),
         "layout": layout,

@@ -18,12 +18,22 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
     def common(p: argparse.ArgumentParser) -> None:
         names = ", ".join([*runner.AGENTS.names(), runner.VLM_AGENT])
-        p.add_argument("--agent", default="expert", help=f"agent name ({names})")
+        p.add_argument(
+            "--agent",
+            default="expert",
+            help=f"agent name ({names}). sb3:PATH loads a Stable-Baselines3 archive, which unpickles "
+            "Python objects and so can run arbitrary code: only load model files you trust",
+        )
         p.add_argument("--out", type=Path, required=True, help="output directory (resumable)")
         p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
         p.add_argument("--frames", action="store_true", help="save front and BEV PNGs of every decision")
         p.add_argument("--video", action="store_true", help="save an animated GIF of the front camera")
         p.add_argument("--progress", action="store_true", help="progress bar on stderr (default: on a TTY)")
+        p.add_argument(
+            "--force",
+            action="store_true",
+            help="redo scenarios that --out already has results for (needed when a scenario file changed)",
+        )
         v = p.add_argument_group("VLM agent (--agent vlm; docs/vlm.md)")
         v.add_argument("--base-url", help="OpenAI-compatible server, e.g. http://localhost:8000/v1")
         v.add_argument("--model", help="served model id, or a preset key (drivehierarchy r4 models)")
@@ -49,6 +59,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
     run = cmds.add_parser("run", help="drive one scenario")
     run.add_argument("--scenario", required=True, help="scenario file or built-in id")
+    run.add_argument("--json", action="store_true", help="print the scene score record as JSON")
     common(run)
     run.set_defaults(func=_run)
 
@@ -57,6 +68,15 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     ev.add_argument("--jobs", type=int, default=1, help="scenarios in flight at once (default 1)")
     ev.add_argument("--seeds", type=int, default=1, help="run every scenario with K seeds (default 1)")
     ev.add_argument("--ray", metavar="ADDRESS", help="run scenarios as Ray tasks ('local' starts one)")
+    ev.add_argument(
+        "--worker-timeout",
+        type=float,
+        default=600.0,
+        metavar="S",
+        help="kill a SUMO worker process that does not answer a call within S seconds; its scenario "
+        "fails, the others go on (default 600; 0: no limit). For a non-VLM agent one call is the "
+        "whole scenario",
+    )
     common(ev)
     ev.set_defaults(func=_evaluate)
 
@@ -117,7 +137,15 @@ def _opts(args: argparse.Namespace) -> runner.RunOptions:
         vlm=_vlm_options(args),
         ray_address=getattr(args, "ray", None),
         progress=args.progress or sys.stderr.isatty(),
+        worker_timeout_s=_worker_timeout(getattr(args, "worker_timeout", 600.0)),
+        force=args.force,
     )
+
+
+def _worker_timeout(value: float) -> float | None:
+    if value < 0:
+        raise ConfigError(f"--worker-timeout = {value!r}: expected ≥ 0 seconds (0: no limit)")
+    return value or None
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -127,7 +155,29 @@ def _run(args: argparse.Namespace) -> int:
     except runner.BatchAborted as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 3
-    print(json.dumps(results[0]["score"], indent=2, sort_keys=True))
+    except runner.ScenariosFailed as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 4
+    result = results[0]
+    s = result["score"]
+    if args.json:
+        print(json.dumps(s, indent=2, sort_keys=True))
+        return 0
+    scene = args.out / "scenes" / result["key"]
+    print(
+        f"{result['key']}: S_R4 {s['score_composed']:.2f} ({s['status']}, {s['termination_reason']}); "
+        f"route {s['score_route']:.3f}, safety {s['score_safety']:.3f}, "
+        f"efficiency {s['score_efficiency']:.3f}"
+    )
+    artifacts = [("score record", scene / "scene_score.json"), ("episode log", scene / "episode_log.jsonl")]
+    artifacts += [("decisions", scene / "decisions.jsonl"), ("events", scene / "events.json")]
+    if args.frames:
+        artifacts.append(("frames", scene / "frames"))
+    if args.video:
+        artifacts.append(("video", scene / "episode.gif"))
+    for what, path in artifacts:
+        if path.exists():
+            print(f"  {what + ':':<14}{path}")
     return 0
 
 
@@ -139,6 +189,13 @@ def _evaluate(args: argparse.Namespace) -> int:
     except runner.BatchAborted as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 3
+    except runner.ScenariosFailed as exc:
+        summary = args.out / "summary.md"
+        if summary.exists():  # the scenarios that finished
+            print()
+            print(summary.read_text(encoding="utf-8"))
+        print(f"error: {len(exc.failed)} scenario(s) failed: {', '.join(exc.failed)}: {exc}", file=sys.stderr)
+        return 4
     print()
     print(runner.summary_table(results))
     return 0

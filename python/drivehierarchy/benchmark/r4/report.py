@@ -25,6 +25,12 @@ def category_label(category: str) -> str:
     return f"Sce {int(m.group(1))}" if m else category
 
 
+def category_name(category: str) -> str:
+    """`05_t_intersection` → `T intersection` (plot labels; the table keeps the paper's Sce N)."""
+    name = _PREFIX.sub("", category).replace("_", " ")
+    return name[:1].upper() + name[1:]
+
+
 def _ci_text(ci: list[float] | None) -> str:
     return f" [{ci[0]:.3f}, {ci[1]:.3f}]" if ci else ""
 
@@ -101,6 +107,8 @@ def write_run_tables(out: Path, summary: dict[str, Any], model: str) -> None:
 
 def read_run(run: Path) -> tuple[str, dict[str, Any]]:
     path = run / "summary.json"
+    if not run.exists():
+        raise ConfigError(f"{run}: does not exist (expected an `r4 evaluate` output directory)")
     if not path.exists():
         raise ConfigError(f"{path}: not found (is {run} a finished `r4 evaluate` output directory?)")
     summary = json.loads(path.read_text(encoding="utf-8"))
@@ -155,7 +163,7 @@ def bar_plot(runs: list[tuple[str, dict[str, Any]]], path: Path) -> None:
                 ]
             )
         ax.bar(x + (i - (len(rows) - 1) / 2) * width, vals, width, yerr=err, capsize=2, label=r["model"])
-    ax.set_xticks(x, [category_label(c) for c in cats])
+    ax.set_xticks(x, [category_name(c) for c in cats], rotation=30, ha="right")
     ax.set_ylabel("mean S_R4")
     ax.set_title("R4 per scenario category")
     ax.legend(fontsize="small")

@@ -13,7 +13,9 @@ the built message (two JPEG data URLs), the step's info and the final record tra
 
 A worker that dies (killed, SUMO crashed) is reported as `WorkerDied` for the scenario it was
 driving — on the next call, or within `POLL_S` of the death while a call is waiting — never a hang.
-The pool then starts a fresh worker for later scenarios. Workers exit when the harness's end of
+A worker that does not answer a call within the pool's `timeout_s` (hung: SUMO stuck, a deadlock,
+the process stopped) is killed and reported as `WorkerTimeout`. The pool then starts a fresh
+worker for later scenarios. Workers exit when the harness's end of
 the socket closes (including when the harness itself is killed).
 """
 
@@ -26,6 +28,7 @@ import pickle
 import socket
 import subprocess
 import sys
+import time
 import traceback
 from collections.abc import AsyncIterator, Callable
 from concurrent.futures import Executor
@@ -41,6 +44,22 @@ POLL_S = 0.2  # how often a waiting call checks that its worker is still alive
 
 class WorkerDied(SimulationError):
     """The worker process driving a scenario died; the scenario is redone on resume."""
+
+    def __init__(self, message: str, *, pid: int | None = None, exit_code: int | None = None) -> None:
+        super().__init__(message)
+        self.pid = pid
+        self.exit_code = exit_code
+
+    def __reduce__(self) -> tuple[Any, ...]:  # keeps pid and exit code across pickling
+        return (_rebuild, (type(self), str(self), self.pid, self.exit_code))
+
+
+class WorkerTimeout(WorkerDied):
+    """The worker did not answer a call in time and was killed; the scenario is redone on resume."""
+
+
+def _rebuild(cls: type[WorkerDied], message: str, pid: int | None, exit_code: int | None) -> WorkerDied:
+    return cls(message, pid=pid, exit_code=exit_code)
 
 
 def _serve(conn: Any) -> None:
@@ -92,7 +111,9 @@ class SceneWorker:
     """One worker process and the harness's end of its socket. `request` blocks (run it in a
     thread); `call` is its async form."""
 
-    def __init__(self, index: int) -> None:
+    def __init__(self, index: int, timeout_s: float | None = None) -> None:
+        # The longest one call may take (None: no limit); a hung worker is killed after it.
+        self.timeout_s = timeout_s
         here, there = socket.socketpair()
         # The worker imports this very package (not whatever `drivehierarchy` its path finds first).
         env = dict(os.environ)
@@ -122,15 +143,31 @@ class SceneWorker:
         what = f"exit code {code}" if code is not None else "lost its socket"
         return WorkerDied(
             f"worker process {self.name} (pid {self.process.pid}) driving "
-            f"{self.scene or 'a scenario'} died ({what}); the scenario's SUMO simulation is gone"
+            f"{self.scene or 'a scenario'} died ({what}); the scenario's SUMO simulation is gone",
+            pid=self.process.pid,
+            exit_code=code,
+        )
+
+    def _timed_out(self, op: str, target: Any) -> WorkerTimeout:
+        self.kill()
+        what = target if isinstance(target, str) else getattr(target, "__name__", repr(target))
+        return WorkerTimeout(
+            f"worker process {self.name} (pid {self.process.pid}) driving "
+            f"{self.scene or 'a scenario'} did not answer `{op} {what}` within {self.timeout_s:g} s "
+            "(hung); killed it, the scenario's SUMO simulation is gone",
+            pid=self.process.pid,
+            exit_code=self.process.returncode,
         )
 
     def request(self, op: str, target: Any, *args: Any, **kwargs: Any) -> Any:
+        deadline = None if self.timeout_s is None else time.monotonic() + self.timeout_s
         try:
             self.conn.send((op, target, args, kwargs))
             while not self.conn.poll(POLL_S):
                 if not self.alive:
                     raise self._died()
+                if deadline is not None and time.monotonic() >= deadline:
+                    raise self._timed_out(op, target)
             reply = self.conn.recv()
         except (EOFError, OSError) as exc:
             raise self._died(exc) from None
@@ -174,7 +211,8 @@ class WorkerPool:
     """Workers started on demand (at most as many as scenarios using them at once)
     and reused across scenarios; a dead one is replaced."""
 
-    def __init__(self) -> None:
+    def __init__(self, timeout_s: float | None = None) -> None:
+        self.timeout_s = timeout_s
         self._idle: list[SceneWorker] = []
         self._all: list[SceneWorker] = []
         self.started = 0
@@ -200,7 +238,7 @@ class WorkerPool:
                 self._all.remove(w)
 
     def _start(self) -> SceneWorker:
-        w = SceneWorker(self.started)
+        w = SceneWorker(self.started, self.timeout_s)
         self.started += 1
         self._all.append(w)
         return w

@@ -65,6 +65,8 @@ class SumoTraffic:
         self._running = False
         self._tmp: Path | None = None
         self._mirrors: set[int] = set()
+        # Ego / mirror ids taken out of SUMO because moveToXY could not map them.
+        self._out: set[str] = set()
         self._tls: tuple[str, ...] = ()
         self._type_info: dict[str, tuple[float, float, float, str, tuple[int, ...]]] = {}
         self._vars = (
@@ -139,6 +141,7 @@ class SumoTraffic:
             ) from None
         self._running = True
         self._mirrors = set()
+        self._out = set()
         self._type_info = {}
         self.steps = 0
         ls.simulation.subscribe([tc.VAR_DEPARTED_VEHICLES_IDS])
@@ -207,22 +210,49 @@ class SumoTraffic:
 
     # -- per tick -----------------------------------------------------------------------------
     def _move(self, movers: list[tuple[int, float, float, float, float, int]]) -> None:
-        move = self._ls.vehicle.moveToXY
+        ls = self._ls
         if len(movers) - 1 != len(self._mirrors):
             # A scenario actor left the world: its SUMO double leaves too.
             gone = self._mirrors - {m[0] for m in movers}
             for ident in sorted(gone):
-                self._ls.vehicle.remove(_MIRROR.format(ident))
+                vid = _MIRROR.format(ident)
+                if vid in self._out:
+                    self._out.discard(vid)
+                else:
+                    ls.vehicle.remove(vid)
                 self._mirrors.discard(ident)
         for ident, x, y, angle, _speed, keep_route in movers:
             if ident == 0:
-                move(EGO_ID, "", -1, x, y, angle, keep_route)
-                continue
-            vid = _MIRROR.format(ident)
-            if ident not in self._mirrors:
-                self._ls.vehicle.add(vid, EGO_ROUTE, typeID=vid, depart="now")
-                self._mirrors.add(ident)
-            move(vid, "", -1, x, y, angle, keep_route)
+                vid, vtype = EGO_ID, EGO_ID
+            else:
+                vid = vtype = _MIRROR.format(ident)
+                if ident not in self._mirrors:
+                    ls.vehicle.add(vid, EGO_ROUTE, typeID=vtype, depart="now")
+                    self._mirrors.add(ident)
+            if vid in self._out:
+                # Out of SUMO since it could not be mapped: try it again at its new place.
+                try:
+                    ls.vehicle.add(vid, EGO_ROUTE, typeID=vtype, depart="now")
+                except self._ls.TraCIException:
+                    continue
+                self._out.discard(vid)
+            # keepRoute=1 maps onto SUMO's copy of the route, which a keepRoute=2 placement
+            # replaced; then the ego is placed anywhere.
+            if not self._try_move(vid, x, y, angle, keep_route) and not (
+                keep_route == 1 and self._try_move(vid, x, y, angle, 2)
+            ):
+                # SUMO cannot place it (off its network, too far from a lane its class may use):
+                # it leaves SUMO until it can be mapped again; the world goes on without it there.
+                with contextlib.suppress(self._ls.TraCIException):
+                    ls.vehicle.remove(vid)
+                self._out.add(vid)
+
+    def _try_move(self, vid: str, x: float, y: float, angle: float, keep_route: int) -> bool:
+        try:
+            self._ls.vehicle.moveToXY(vid, "", -1, x, y, angle, keep_route)
+        except self._ls.TraCIException:
+            return False
+        return True
 
     def _departed(self) -> list[tuple[str, float, float, float, str, tuple[int, ...]]]:
         ls, tc = self._ls, self._tc

@@ -20,10 +20,9 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-
-import tomllib
 
 MAPS_DIR = Path(__file__).resolve().parent
 TABLE = MAPS_DIR / "build.toml"
