@@ -283,6 +283,8 @@ struct Episode {
     bridge: ActuationBridge,
     score: ScoreTracker,
     seed: u64,
+    /// The ego's start in this episode (varied by the seed).
+    start: crate::geom::Vec2,
     samples: Vec<TrajectorySample>,
     hasher: Sha256,
     control: Control,
@@ -345,10 +347,18 @@ impl Sim {
 
     /// Starts a new episode from t = 0 and plays the warm-up ticks with zero control.
     pub fn reset(&mut self, seed: u64) -> Result<(Observation, StepInfo)> {
-        let mut world = World::new(&self.scenario, seed)?;
+        self.reset_varied(seed, seed)
+    }
+
+    /// [`Sim::reset`] with the world (SUMO, random trips) seeded by `seed` and the scenario
+    /// varied by `variation` ([`ResolvedScenario::varied`]; 0 = as written).
+    pub fn reset_varied(&mut self, seed: u64, variation: u64) -> Result<(Observation, StepInfo)> {
+        let scenario = self.scenario.varied(variation);
+        let mut world = World::new(&scenario, seed)?;
+        world.set_variation_seed(variation);
         self.start_traffic(&mut world)?;
         let route = self.tracker.route().clone();
-        let start = self.scenario.ego.start.pos;
+        let start = scenario.ego.start.pos;
         let on_road = self.scenario.map.drivable().is_drivable(start);
         let score = ScoreTracker::new(
             route.clone(),
@@ -365,6 +375,7 @@ impl Sim {
             bridge: ActuationBridge::new(),
             score,
             seed,
+            start,
             samples: Vec::with_capacity(1024),
             hasher: Sha256::new(),
             control: Control::default(),
@@ -520,7 +531,7 @@ impl Sim {
         let header = RunHeader::new(
             self.scenario.id.clone(),
             self.tracker.route(),
-            self.scenario.ego.start.pos,
+            ep.start,
             self.scenario.ego.destination,
             self.scenario.reference_duration_given_s,
             self.params.clone(),

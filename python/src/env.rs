@@ -62,14 +62,18 @@ impl PySim {
         self.inner.scenario().route_length_m()
     }
 
-    /// Starts an episode: `(observation, info)`.
+    /// Starts an episode: `(observation, info)`. `seed` seeds the world (SUMO, random trips);
+    /// `variation` (default: `seed`) the scenario's jitter, 0 = the scenario as written.
+    #[pyo3(signature = (seed, variation = None))]
     fn reset<'py>(
         &mut self,
         py: Python<'py>,
         seed: u64,
+        variation: Option<u64>,
     ) -> PyResult<(Bound<'py, PyDict>, Bound<'py, PyAny>)> {
         let inner = &mut self.inner;
-        let (obs, info) = py.detach(|| inner.reset(seed)).map_err(|e| err(py, e))?;
+        let v = variation.unwrap_or(seed);
+        let (obs, info) = py.detach(|| inner.reset_varied(seed, v)).map_err(|e| err(py, e))?;
         self.expert.reset();
         if let Ok(world) = self.inner.world() {
             self.expert.set_vehicle(world.vehicle_params());
@@ -291,10 +295,17 @@ impl PySim {
         self.inner.traffic_name().map(str::to_owned)
     }
 
-    /// The SUMO route file the co-simulation would load for an episode seed.
-    fn traffic_routes(&self, seed: u64) -> String {
+    /// The SUMO route file the co-simulation would load for an episode seed (the demand varied
+    /// by `variation`, default `seed`).
+    #[pyo3(signature = (seed, variation = None))]
+    fn traffic_routes(&self, seed: u64, variation: Option<u64>) -> String {
         let s = self.inner.scenario();
-        s.traffic.sumo_routes_xml(&s.map, seed, &s.ego, &dh_env::scenario::traffic::mirror_specs(&s.actors))
+        s.traffic.varied(variation.unwrap_or(seed)).sumo_routes_xml(
+            &s.map,
+            seed,
+            &s.ego,
+            &dh_env::scenario::traffic::mirror_specs(&s.actors),
+        )
     }
 
     /// Active actors as rows `[id, x, y, yaw, speed_mps, length_m, width_m, is_traffic, signals]`.

@@ -132,7 +132,45 @@ pub enum BrakeWhen {
     AtS(f64),
     /// Seconds after the actor's trigger fired.
     AfterS(f64),
+    /// The ego centre within `radius_m` of `point` (None: of the actor's centre, as it moves).
+    EgoWithin { radius_m: f64, point: Option<Vec2> },
+    /// The ego's bumper gap behind the actor along the ego route ≤ `gap_m`.
+    EgoGap { gap_m: f64 },
+    /// The ego's time gap (bumper gap ÷ ego speed) ≤ `gap_s`.
+    EgoTimeGap { gap_s: f64 },
+    /// The ego's time to collision (bumper gap ÷ closing speed, closing only) ≤ `ttc_s`.
+    EgoTtc { ttc_s: f64 },
+    /// The ego expected at `point` (route arc length `route_s`) within `eta_s`.
+    EgoEta { eta_s: f64, point: Vec2, route_s: f64 },
+    /// The actor's `pace` gap has stayed settled for `held_s`.
+    GapHeld { held_s: f64 },
+    /// `delay_s` after `event` of actor `actor` (index).
+    After { actor: usize, event: ChainEvent, delay_s: f64 },
 }
+
+/// Ego-relative pacing (see [`crate::scenario::schema::PaceSpec`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pace {
+    pub mode: PaceMode,
+    pub min_speed_mps: f64,
+    pub max_speed_mps: f64,
+    /// Arc length along the path where pacing ends (∞ = never).
+    pub until_s: f64,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PaceMode {
+    /// Hold a bumper gap of `gap_m` + `gap_s` × ego speed ahead of the ego along its route.
+    Gap { gap_m: f64, gap_s: f64 },
+    /// Reach arc length `actor_s` of the path (the point `point`, at `route_s` along the ego
+    /// route) `offset_s` after the ego's expected arrival there.
+    Meet { point: Vec2, route_s: f64, actor_s: f64, offset_s: f64 },
+}
+
+/// Gain of the gap controller: speed = ego speed − gain × (gap − target gap), 1/s.
+pub const PACE_GAIN_PER_S: f64 = 0.5;
+/// A pace gap counts as settled within max(this, 15 % of the target) of its target, m.
+pub const PACE_SETTLED_M: f64 = 1.0;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BrakeEvent {
@@ -161,6 +199,8 @@ pub struct ScriptedPath {
     pub accel_mps2: f64,
     pub trigger: Trigger,
     pub brake: Option<BrakeEvent>,
+    /// Ego-relative speed control while moving (None: the leg speeds).
+    pub pace: Option<Pace>,
     pub at_end: AtEnd,
 }
 
@@ -172,6 +212,8 @@ impl ScriptedPath {
     }
 }
 
+// One per actor, resolved once per scenario: the size difference does not matter.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone)]
 pub enum ActorMotion {
     /// Never moves (obstacles).
@@ -223,6 +265,8 @@ pub struct ResolvedScenario {
     pub traffic: crate::scenario::traffic::TrafficDemand,
     /// Traffic-light overrides (`[[lights]]`), one per overridden light, in file order.
     pub lights: Vec<LightProgram>,
+    /// Bounds of the per-seed jitter ([`ResolvedScenario::varied`]).
+    pub variation: crate::scenario::variation::Variation,
 }
 
 impl ResolvedScenario {
@@ -293,7 +337,9 @@ impl ResolvedScenario {
                     (ActorMotion::Scripted(q), ChainEvent::Brake) => match q.brake.map(|b| b.when) {
                         Some(BrakeWhen::AfterS(dt)) => dt,
                         Some(BrakeWhen::AtS(s)) => travel_s(q, s),
-                        None => 0.0,
+                        Some(BrakeWhen::GapHeld { held_s }) => held_s,
+                        // Ego-relative and chained brakes: estimated at the trigger.
+                        _ => 0.0,
                     },
                     (ActorMotion::Scripted(q), ChainEvent::End) => travel_s(q, q.path.length()) + hold_s(q),
                     _ => 0.0,
@@ -883,52 +929,227 @@ fn resolve_trigger(
     if let Some(eta) = t.ego_eta_s {
         let eta_s = ctx.positive(&format!("{field}.ego_eta_s"), eta)?;
         let point = resolve_of(ctx, field, t.of.as_ref(), self_pos)?;
-        let route = tc.ego_route;
-        let proj =
-            route.project(point).ok_or_else(|| ctx.err(format!("{field}.of"), "?", "empty ego route"))?;
-        // The foot of the perpendicular must fall strictly inside the route (not clamped to
-        // its start or destination) and near it.
-        if proj.s <= 1e-6 || proj.s >= route.length() - 1e-6 || proj.distance > ETA_MAX_OFFSET_M {
-            return Err(ctx.err(
-                format!("{field}.of"),
-                format!("({:.2}, {:.2})", point.x, point.y),
-                format!(
-                    "does not project onto the ego route: nearest route point at s = {:.1} m of {:.1} m, {:.1} m away (the point must lie beside the route, within {ETA_MAX_OFFSET_M} m, between the ego start and destination)",
-                    proj.s,
-                    route.length(),
-                    proj.distance
-                ),
-            ));
-        }
-        return Ok(Trigger::EgoEta { eta_s, point, route_s: proj.s });
+        let route_s = ego_route_s_of(ctx, tc, &format!("{field}.of"), point)?;
+        return Ok(Trigger::EgoEta { eta_s, point, route_s });
     }
-    let name = t.after.as_deref().unwrap_or_default();
-    let af = format!("{field}.after");
-    let hits: Vec<usize> = tc.names.iter().enumerate().filter(|(_, n)| *n == name).map(|(i, _)| i).collect();
-    let actor = match hits.as_slice() {
-        [i] => *i,
-        [] => {
-            return Err(ctx.err(
-                &af,
-                format!("\"{name}\""),
-                format!("no actor of that name (actors: {})", tc.names.join(", ")),
-            ))
-        }
-        _ => {
-            return Err(ctx.err(
-                &af,
-                format!("\"{name}\""),
-                "several actors have that name; give them unique `name`s",
-            ))
-        }
-    };
+    let actor = actor_by_name(ctx, tc, &format!("{field}.after"), t.after.as_deref().unwrap_or_default())?;
     let delay_s = ctx.nonneg(&format!("{field}.delay_s"), t.delay_s.unwrap_or(0.0))?;
-    let event = match t.event.unwrap_or_default() {
+    Ok(Trigger::After { actor, event: chain_event(t.event), delay_s })
+}
+
+fn chain_event(e: Option<ChainEventSpec>) -> ChainEvent {
+    match e.unwrap_or_default() {
         ChainEventSpec::Start => ChainEvent::Start,
         ChainEventSpec::Brake => ChainEvent::Brake,
         ChainEventSpec::End => ChainEvent::End,
+    }
+}
+
+/// The arc length along the ego route of a point's projection; the foot of the perpendicular
+/// must fall strictly inside the route (not clamped to its start or destination) and near it.
+fn ego_route_s_of(ctx: &Ctx<'_>, tc: &TriggerCtx<'_>, field: &str, point: Vec2) -> Result<f64> {
+    let route = tc.ego_route;
+    let proj = route.project(point).ok_or_else(|| ctx.err(field, "?", "empty ego route"))?;
+    if proj.s <= 1e-6 || proj.s >= route.length() - 1e-6 || proj.distance > ETA_MAX_OFFSET_M {
+        return Err(ctx.err(
+            field,
+            format!("({:.2}, {:.2})", point.x, point.y),
+            format!(
+                "does not project onto the ego route: nearest route point at s = {:.1} m of {:.1} m, {:.1} m away (the point must lie beside the route, within {ETA_MAX_OFFSET_M} m, between the ego start and destination)",
+                proj.s,
+                route.length(),
+                proj.distance
+            ),
+        ));
+    }
+    Ok(proj.s)
+}
+
+/// Index of the scenario actor called `name` (its `name`, or `actors[i]`).
+fn actor_by_name(ctx: &Ctx<'_>, tc: &TriggerCtx<'_>, field: &str, name: &str) -> Result<usize> {
+    let hits: Vec<usize> = tc.names.iter().enumerate().filter(|(_, n)| *n == name).map(|(i, _)| i).collect();
+    match hits.as_slice() {
+        [i] => Ok(*i),
+        [] => Err(ctx.err(
+            field,
+            format!("\"{name}\""),
+            format!("no actor of that name (actors: {})", tc.names.join(", ")),
+        )),
+        _ => Err(ctx.err(
+            field,
+            format!("\"{name}\""),
+            "several actors have that name; give them unique `name`s",
+        )),
+    }
+}
+
+/// `brake` → when and how the actor brakes.
+fn resolve_brake(
+    ctx: &Ctx<'_>,
+    tc: &TriggerCtx<'_>,
+    bf: &str,
+    b: &BrakeSpec,
+    has_pace: bool,
+) -> Result<BrakeEvent> {
+    let given: Vec<&str> = [
+        ("at_s", b.at_s.is_some()),
+        ("after_s", b.after_s.is_some()),
+        ("ego_within_m", b.ego_within_m.is_some()),
+        ("ego_gap_m", b.ego_gap_m.is_some()),
+        ("ego_gap_s", b.ego_gap_s.is_some()),
+        ("ego_ttc_s", b.ego_ttc_s.is_some()),
+        ("ego_eta_s", b.ego_eta_s.is_some()),
+        ("gap_held_s", b.gap_held_s.is_some()),
+        ("after", b.after.is_some()),
+    ]
+    .iter()
+    .filter(|g| g.1)
+    .map(|g| g.0)
+    .collect();
+    if given.len() != 1 {
+        return Err(ctx.err(
+            bf,
+            if given.is_empty() { "{}".to_string() } else { given.join(" + ") },
+            "give exactly one of `at_s`, `after_s`, `ego_within_m`, `ego_gap_m`, `ego_gap_s`, `ego_ttc_s`, `ego_eta_s`, `gap_held_s` or `after`",
+        ));
+    }
+    if let (Some(of), false) = (&b.of, b.ego_within_m.is_some() || b.ego_eta_s.is_some()) {
+        return Err(ctx.err(
+            format!("{bf}.of"),
+            format!("{of:?}"),
+            "`of` goes with `ego_within_m` or `ego_eta_s`",
+        ));
+    }
+    if b.after.is_none() {
+        if let Some(d) = b.delay_s {
+            return Err(ctx.err(format!("{bf}.delay_s"), d, "`delay_s` goes with `after`"));
+        }
+        if let Some(e) = b.event {
+            return Err(ctx.err(format!("{bf}.event"), format!("{e:?}"), "`event` goes with `after`"));
+        }
+    }
+    let when = if let Some(v) = b.at_s {
+        BrakeWhen::AtS(ctx.nonneg(&format!("{bf}.at_s"), v)?)
+    } else if let Some(v) = b.after_s {
+        BrakeWhen::AfterS(ctx.nonneg(&format!("{bf}.after_s"), v)?)
+    } else if let Some(v) = b.ego_within_m {
+        let radius_m = ctx.positive(&format!("{bf}.ego_within_m"), v)?;
+        let point = match &b.of {
+            None => None,
+            Some(OfSpec::Name(n)) if n == "actor_self" => None,
+            Some(of) => Some(resolve_of(ctx, bf, Some(of), Vec2::ZERO)?),
+        };
+        BrakeWhen::EgoWithin { radius_m, point }
+    } else if let Some(v) = b.ego_gap_m {
+        BrakeWhen::EgoGap { gap_m: ctx.finite(&format!("{bf}.ego_gap_m"), v)? }
+    } else if let Some(v) = b.ego_gap_s {
+        BrakeWhen::EgoTimeGap { gap_s: ctx.positive(&format!("{bf}.ego_gap_s"), v)? }
+    } else if let Some(v) = b.ego_ttc_s {
+        BrakeWhen::EgoTtc { ttc_s: ctx.positive(&format!("{bf}.ego_ttc_s"), v)? }
+    } else if let Some(v) = b.ego_eta_s {
+        let eta_s = ctx.positive(&format!("{bf}.ego_eta_s"), v)?;
+        let point = match &b.of {
+            None | Some(OfSpec::Name(_)) => {
+                return Err(ctx.err(
+                    format!("{bf}.of"),
+                    b.of.as_ref().map_or("<missing>".to_string(), |o| format!("{o:?}")),
+                    "`ego_eta_s` on a brake needs `of` = a point `[x, y]` or a place",
+                ))
+            }
+            Some(of) => resolve_of(ctx, bf, Some(of), Vec2::ZERO)?,
+        };
+        let route_s = ego_route_s_of(ctx, tc, &format!("{bf}.of"), point)?;
+        BrakeWhen::EgoEta { eta_s, point, route_s }
+    } else if let Some(v) = b.gap_held_s {
+        if !has_pace {
+            return Err(ctx.err(format!("{bf}.gap_held_s"), v, "`gap_held_s` needs a `pace` with a gap"));
+        }
+        BrakeWhen::GapHeld { held_s: ctx.nonneg(&format!("{bf}.gap_held_s"), v)? }
+    } else {
+        let actor = actor_by_name(ctx, tc, &format!("{bf}.after"), b.after.as_deref().unwrap_or_default())?;
+        let delay_s = ctx.nonneg(&format!("{bf}.delay_s"), b.delay_s.unwrap_or(0.0))?;
+        BrakeWhen::After { actor, event: chain_event(b.event), delay_s }
     };
-    Ok(Trigger::After { actor, event, delay_s })
+    let hold_s = match b.hold_s {
+        Some(h) => Some(ctx.nonneg(&format!("{bf}.hold_s"), h)?),
+        None => None,
+    };
+    Ok(BrakeEvent {
+        when,
+        decel_mps2: ctx.positive(&format!("{bf}.decel_mps2"), b.decel_mps2)?,
+        to_speed_mps: ctx.nonneg(&format!("{bf}.to_speed_mps"), b.to_speed_mps)?,
+        hold_s,
+    })
+}
+
+/// `pace` → ego-relative speed control of a scripted actor on `path` cruising at `speed`.
+fn resolve_pace(
+    ctx: &Ctx<'_>,
+    tc: &TriggerCtx<'_>,
+    pf: &str,
+    p: &PaceSpec,
+    path: &Polyline,
+    speed: f64,
+) -> Result<Pace> {
+    let gap = p.gap_s.is_some() || p.gap_m.is_some();
+    let mode = match (gap, &p.meet) {
+        (true, None) => {
+            if let Some(o) = p.offset_s {
+                return Err(ctx.err(format!("{pf}.offset_s"), o, "`offset_s` goes with `meet`"));
+            }
+            let gap_s = ctx.nonneg(&format!("{pf}.gap_s"), p.gap_s.unwrap_or(0.0))?;
+            let gap_m = ctx.finite(&format!("{pf}.gap_m"), p.gap_m.unwrap_or(0.0))?;
+            // The actor must start beside the ego route to measure a gap along it.
+            let start = path.point_at(0.0);
+            let d = tc.ego_route.project(start).map_or(f64::INFINITY, |q| q.distance);
+            if d > ETA_MAX_OFFSET_M {
+                return Err(ctx.err(
+                    pf,
+                    format!("gap_s = {gap_s}, gap_m = {gap_m}"),
+                    format!("a gap is measured along the ego route, but the actor starts {d:.1} m from it (at most {ETA_MAX_OFFSET_M} m)"),
+                ));
+            }
+            PaceMode::Gap { gap_m, gap_s }
+        }
+        (false, Some(of)) => {
+            if let Some(OfSpec::Name(n)) = Some(of) {
+                return Err(ctx.err(format!("{pf}.meet"), n, "give a point `[x, y]` or a place"));
+            }
+            let point = resolve_of(ctx, &format!("{pf}.meet"), Some(of), Vec2::ZERO)?;
+            let route_s = ego_route_s_of(ctx, tc, &format!("{pf}.meet"), point)?;
+            let q = path.project(point).ok_or_else(|| ctx.err(format!("{pf}.meet"), "?", "empty path"))?;
+            if q.distance > 3.0 || q.s >= path.length() - 1e-6 {
+                return Err(ctx.err(
+                    format!("{pf}.meet"),
+                    format!("({:.2}, {:.2})", point.x, point.y),
+                    format!("not on the actor's path: nearest path point {:.1} m away at s = {:.1} m of {:.1} m (at most 3 m, before the path end)", q.distance, q.s, path.length()),
+                ));
+            }
+            let offset_s = ctx.finite(&format!("{pf}.offset_s"), p.offset_s.unwrap_or(0.0))?;
+            PaceMode::Meet { point, route_s, actor_s: q.s, offset_s }
+        }
+        (true, Some(_)) => {
+            return Err(ctx.err(pf, "gap + meet", "give a gap (`gap_s`, `gap_m`) or `meet`, not both"))
+        }
+        (false, None) => {
+            return Err(ctx.err(pf, "{}", "give a gap (`gap_s` and/or `gap_m`) or a conflict point `meet`"))
+        }
+    };
+    let min_speed_mps = ctx.nonneg(&format!("{pf}.min_speed_mps"), p.min_speed_mps.unwrap_or(0.0))?;
+    let max_speed_mps =
+        ctx.positive(&format!("{pf}.max_speed_mps"), p.max_speed_mps.unwrap_or(1.5 * speed))?;
+    if max_speed_mps < min_speed_mps {
+        return Err(ctx.err(
+            format!("{pf}.max_speed_mps"),
+            max_speed_mps,
+            format!("below min_speed_mps ({min_speed_mps})"),
+        ));
+    }
+    let until_s = match p.until_s {
+        Some(u) => ctx.nonneg(&format!("{pf}.until_s"), u)?,
+        None => f64::INFINITY,
+    };
+    Ok(Pace { mode, min_speed_mps, max_speed_mps, until_s })
 }
 
 /// Chained triggers must point at scripted actors (brake: one with a brake event) and must
@@ -1140,26 +1361,14 @@ fn resolve_actor(ctx: &Ctx<'_>, tc: &TriggerCtx<'_>, i: usize, a: &ActorSpec) ->
         None => 3.0,
     };
     let trigger = resolve_trigger(ctx, tc, &format!("{field}.start"), a.start.as_ref(), path.point_at(0.0))?;
+    let pace = match &a.pace {
+        Some(p) => Some(resolve_pace(ctx, tc, &format!("{field}.pace"), p, &path, speed)?),
+        None => None,
+    };
+    let has_gap = matches!(pace, Some(Pace { mode: PaceMode::Gap { .. }, .. }));
     let brake = match &a.brake {
         None => None,
-        Some(b) => {
-            let bf = format!("{field}.brake");
-            let when = match (b.at_s, b.after_s) {
-                (Some(s), None) => BrakeWhen::AtS(ctx.nonneg(&format!("{bf}.at_s"), s)?),
-                (None, Some(t)) => BrakeWhen::AfterS(ctx.nonneg(&format!("{bf}.after_s"), t)?),
-                _ => return Err(ctx.err(&bf, "{..}", "give exactly one of `at_s` or `after_s`")),
-            };
-            let hold_s = match b.hold_s {
-                Some(h) => Some(ctx.nonneg(&format!("{bf}.hold_s"), h)?),
-                None => None,
-            };
-            Some(BrakeEvent {
-                when,
-                decel_mps2: ctx.positive(&format!("{bf}.decel_mps2"), b.decel_mps2)?,
-                to_speed_mps: ctx.nonneg(&format!("{bf}.to_speed_mps"), b.to_speed_mps)?,
-                hold_s,
-            })
-        }
+        Some(b) => Some(resolve_brake(ctx, tc, &format!("{field}.brake"), b, has_gap)?),
     };
     let at_end = match a.at_end {
         AtEndSpec::Stop => AtEnd::Stop,
@@ -1172,6 +1381,7 @@ fn resolve_actor(ctx: &Ctx<'_>, tc: &TriggerCtx<'_>, i: usize, a: &ActorSpec) ->
         accel_mps2,
         trigger,
         brake,
+        pace,
         at_end,
     })))
 }
@@ -1272,7 +1482,10 @@ pub fn resolve(file: &Path, spec: &ScenarioFile, opts: &LoadOptions) -> Result<R
     }
     let signs =
         spec.signs.iter().enumerate().map(|(i, s)| resolve_sign(&ctx, i, s)).collect::<Result<Vec<_>>>()?;
-    let traffic = crate::scenario::traffic::resolve_traffic(file, &map, spec.traffic.as_ref(), &ego.route)?;
+    let mut traffic =
+        crate::scenario::traffic::resolve_traffic(file, &map, spec.traffic.as_ref(), &ego.route)?;
+    let (variation, jitter) = crate::scenario::variation::resolve_variation(file, spec.variation.as_ref())?;
+    traffic.jitter = jitter;
     Ok(ResolvedScenario {
         file: file.to_path_buf(),
         id: spec.id.clone(),
@@ -1290,6 +1503,7 @@ pub fn resolve(file: &Path, spec: &ScenarioFile, opts: &LoadOptions) -> Result<R
         signs,
         traffic,
         lights,
+        variation,
     })
 }
 

@@ -46,6 +46,9 @@ pub struct ScenarioFile {
     /// Traffic-light program overrides (`[[lights]]`), applied in every traffic mode.
     #[serde(default)]
     pub lights: Vec<LightOverrideSpec>,
+    /// Bounds of the per-seed jitter (`[variation]`; defaults apply when absent).
+    #[serde(default)]
+    pub variation: Option<crate::scenario::variation::VariationSpec>,
 }
 
 /// A point (and optionally a heading) either on a lane (`lane` + `s` + `offset_m`) or in
@@ -255,8 +258,13 @@ pub struct LightOverrideSpec {
     pub phases: Option<Vec<LightPhaseSpec>>,
 }
 
-/// A hard-braking event: once at arc length `at_s` of the path, or `after_s` seconds after the
-/// trigger, decelerate at `decel_mps2` to `to_speed_mps`; resume after `hold_s` if given.
+/// A hard-braking event: decelerate at `decel_mps2` to `to_speed_mps`, resume after `hold_s` if
+/// given. When, exactly one of: at arc length `at_s` of the path; `after_s` seconds after the
+/// trigger; when the ego comes within `ego_within_m` of `of` (default: the actor itself); when
+/// the ego's bumper gap behind the actor along the ego route falls to `ego_gap_m`, its time gap
+/// to `ego_gap_s` or its time to collision to `ego_ttc_s`; when the ego is expected to reach
+/// `of` within `ego_eta_s`; `gap_held_s` after the actor's `pace` gap has settled; or chained
+/// (`after` + `event`, `delay_s`).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 #[schemars(transform = crate::scenario::schema_rules::brake_alternatives)]
@@ -265,11 +273,74 @@ pub struct BrakeSpec {
     pub at_s: Option<f64>,
     #[serde(default)]
     pub after_s: Option<f64>,
+    /// Brake when the ego centre comes within this radius of `of` (default: the actor's centre).
+    #[serde(default)]
+    pub ego_within_m: Option<f64>,
+    /// Brake when the ego's bumper gap behind the actor (along the ego route) is at most this, m.
+    #[serde(default)]
+    pub ego_gap_m: Option<f64>,
+    /// Brake when the ego's time gap (bumper gap ÷ ego speed) is at most this, s.
+    #[serde(default)]
+    pub ego_gap_s: Option<f64>,
+    /// Brake when the ego's time to collision (bumper gap ÷ closing speed) is at most this, s.
+    #[serde(default)]
+    pub ego_ttc_s: Option<f64>,
+    /// Brake when the ego is expected to reach `of` (required) within this many seconds.
+    #[serde(default)]
+    pub ego_eta_s: Option<f64>,
+    /// Point of `ego_within_m` / `ego_eta_s`: `[x, y]`, a place, or `"actor_self"` (the actor
+    /// where it is at that moment; `ego_within_m` only).
+    #[serde(default)]
+    pub of: Option<OfSpec>,
+    /// Brake once the actor's `pace` gap has stayed within tolerance of its target this long, s.
+    #[serde(default)]
+    pub gap_held_s: Option<f64>,
+    /// Chained: name of the actor whose `event` this brake follows.
+    #[serde(default)]
+    pub after: Option<String>,
+    /// Chained: seconds after the other actor's event (default 0).
+    #[serde(default)]
+    pub delay_s: Option<f64>,
+    /// Chained: which event of the other actor (default `start`).
+    #[serde(default)]
+    pub event: Option<ChainEventSpec>,
     pub decel_mps2: f64,
     #[serde(default)]
     pub to_speed_mps: f64,
     #[serde(default)]
     pub hold_s: Option<f64>,
+}
+
+/// Ego-relative pacing of a scripted actor while it moves: either it holds a gap ahead of the
+/// ego (`gap_s` × ego speed + `gap_m`, bumper to bumper along the ego route; negative = beside
+/// the ego), or it times its arrival at a conflict point `meet` to the ego's (`offset_s` later).
+/// Its speed stays within [`min_speed_mps`, `max_speed_mps`]; pacing ends at arc length
+/// `until_s` of its path, after the meet point, or when its brake event begins.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+#[schemars(transform = crate::scenario::schema_rules::pace_alternatives)]
+pub struct PaceSpec {
+    /// Time part of the gap: seconds at the ego's speed.
+    #[serde(default)]
+    pub gap_s: Option<f64>,
+    /// Distance part of the gap, m (may be negative: the actor's rear behind the ego's front).
+    #[serde(default)]
+    pub gap_m: Option<f64>,
+    /// Conflict point (`[x, y]` or a place): on the actor's path and beside the ego route.
+    #[serde(default)]
+    pub meet: Option<OfSpec>,
+    /// Meet mode: the actor reaches `meet` this many seconds after the ego would (< 0: before).
+    #[serde(default)]
+    pub offset_s: Option<f64>,
+    /// Lower speed bound (default 0: the actor may wait).
+    #[serde(default)]
+    pub min_speed_mps: Option<f64>,
+    /// Upper speed bound (default 1.5 × the actor's speed).
+    #[serde(default)]
+    pub max_speed_mps: Option<f64>,
+    /// Arc length along the path where pacing ends (default: never).
+    #[serde(default)]
+    pub until_s: Option<f64>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -302,6 +373,9 @@ pub struct ActorSpec {
     pub start: Option<TriggerSpec>,
     #[serde(default)]
     pub brake: Option<BrakeSpec>,
+    /// Ego-relative speed: hold a gap to the ego or meet it at a conflict point.
+    #[serde(default)]
+    pub pace: Option<PaceSpec>,
     #[serde(default)]
     pub at_end: AtEndSpec,
     #[serde(default)]

@@ -92,9 +92,49 @@ pub(crate) fn speed_names(schema: &mut Schema) {
     string_names(schema, &SPEED_NAMES);
 }
 
-/// Braking: exactly one of `at_s` and `after_s`.
+/// Braking: exactly one of the `when` keys; `of` only with `ego_within_m` (optional) and
+/// `ego_eta_s` (required there); `delay_s` / `event` only with `after`.
 pub(crate) fn brake_alternatives(schema: &mut Schema) {
-    push_all_of(schema, json!({ "oneOf": [required(&["at_s"]), required(&["after_s"])] }));
+    let whens = [
+        "at_s",
+        "after_s",
+        "ego_within_m",
+        "ego_gap_m",
+        "ego_gap_s",
+        "ego_ttc_s",
+        "ego_eta_s",
+        "gap_held_s",
+        "after",
+    ];
+    let chain = ["delay_s", "event"];
+    let alts: Vec<Value> = whens
+        .iter()
+        .map(|w| {
+            let others: Vec<&str> = whens.iter().copied().filter(|o| o != w).collect();
+            let mut all = vec![required(&[w]), none_of(&others)];
+            match *w {
+                "ego_eta_s" => all.push(required(&["of"])),
+                "ego_within_m" => {}
+                _ => all.push(none_of(&["of"])),
+            }
+            if *w != "after" {
+                all.push(none_of(&chain));
+            }
+            json!({ "allOf": all })
+        })
+        .collect();
+    push_all_of(schema, json!({ "oneOf": alts }));
+}
+
+/// Pacing: a gap (`gap_s` and/or `gap_m`) or a conflict point `meet` (+ `offset_s`).
+pub(crate) fn pace_alternatives(schema: &mut Schema) {
+    push_all_of(
+        schema,
+        json!({ "oneOf": [
+            { "allOf": [{ "anyOf": [required(&["gap_s"]), required(&["gap_m"])] }, none_of(&["meet", "offset_s"])] },
+            { "allOf": [required(&["meet"]), none_of(&["gap_s", "gap_m"])] },
+        ]}),
+    );
 }
 
 /// Lane path: exactly one of `edges` and `lanes`; `start_lane` only with `edges`.

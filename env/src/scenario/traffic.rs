@@ -265,6 +265,8 @@ pub struct TrafficDemand {
     pub vehicles: Vec<DemandVehicle>,
     pub flows: Vec<DemandFlow>,
     pub random: Option<DemandRandom>,
+    /// Per-seed jitter of departures and speed factors (`[variation]`).
+    pub jitter: crate::scenario::variation::TrafficJitter,
 }
 
 /// A scenario actor that SUMO sees as a vehicle placed every tick (`dh_actor_<id>`).
@@ -730,6 +732,7 @@ pub fn resolve_traffic(
         vehicles,
         flows,
         random,
+        jitter: Default::default(),
     })
 }
 
@@ -770,7 +773,7 @@ impl TrafficDemand {
     ) -> Vec<DemandVehicle> {
         let Some(r) = &self.random else { return Vec::new() };
         let n = (r.density_per_km * self.lane_km(map, r)).round() as usize;
-        let mut rng = SplitMix::new(seed);
+        let mut rng = crate::scenario::variation::seeded_rng(seed, 0);
         // Departure edges weighted by their length.
         let weights: Vec<f64> =
             r.edges.iter().map(|&e| edge_length(map, e) * map.edges[e].lanes.len() as f64).collect();

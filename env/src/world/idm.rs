@@ -164,7 +164,9 @@ struct FlowState {
 #[derive(Debug)]
 pub struct IdmTraffic {
     map: Arc<Network>,
+    /// The demand of the running episode (`canonical` varied by the episode seed).
     demand: TrafficDemand,
+    canonical: TrafficDemand,
     ego_start: Vec2,
     tl_ids: Vec<String>,
     lights: LightState,
@@ -185,6 +187,7 @@ impl IdmTraffic {
             tl_ids: map.tl_ids().into_iter().map(str::to_string).collect(),
             lights: LightState::with_programs(&map, &scenario.lights),
             demand: scenario.traffic.clone(),
+            canonical: scenario.traffic.clone(),
             ego_start: scenario.ego.start.pos,
             map,
             vehicles: Vec::new(),
@@ -469,7 +472,8 @@ impl TrafficModel for IdmTraffic {
     fn start(&mut self, input: &TrafficInput<'_>, seed: u64, out: &mut TrafficFrame) -> Result<()> {
         self.vehicles.clear();
         self.next_key = 0;
-        self.rng = SplitMix::new(seed ^ 0x1D_0000);
+        self.demand = self.canonical.varied(input.variation_seed);
+        self.rng = crate::scenario::variation::seeded_rng(seed, 0x1D_0000);
         self.time_s = -self.demand.warmup_s - DT_S;
         let mut pending = self.demand.vehicles.clone();
         pending.extend(self.demand.random_trips(&self.map, seed, self.ego_start, 20.0));

@@ -32,8 +32,8 @@ pub use vehicle::{longitudinal_accel, sanitize_control, step_bicycle, EgoState, 
 use crate::geom::{Pose, Vec2};
 use crate::map::Network;
 use crate::scenario::{
-    ActorMotion, AtEnd, BrakeEvent, BrakeWhen, ChainEvent, ResolvedScenario, ScriptedPath, Trigger,
-    ETA_MIN_SPEED_MPS,
+    ActorMotion, AtEnd, BrakeEvent, BrakeWhen, ChainEvent, PaceMode, ResolvedScenario, ScriptedPath, Trigger,
+    ETA_MAX_OFFSET_M, ETA_MIN_SPEED_MPS, PACE_GAIN_PER_S, PACE_SETTLED_M,
 };
 use crate::view::{ActorKind, ActorView, ContactClass, LightColor, SignView, TrafficLightView};
 use crate::{Error, Result, DT_S};
@@ -110,6 +110,8 @@ struct ActorRt {
     /// When its brake event began / it reached its path end (∞ = not yet), for chained triggers.
     brake_at_s: f64,
     end_at_s: f64,
+    /// Since when its `pace` gap has been settled (∞ = not settled), for `gap_held_s` brakes.
+    gap_settled_since_s: f64,
     /// Removed from the world (end of path with `at_end = remove`, or despawned).
     removed: bool,
     /// Traffic vehicles: the last frame that listed it, and its signal bits.
@@ -123,6 +125,8 @@ pub struct World {
     map: Arc<Network>,
     params: VehicleParams,
     seed: u64,
+    /// Seed of the scenario variation the episode plays (the traffic demand's jitter).
+    variation_seed: u64,
     ego: EgoState,
     ego_view: ActorView,
     actors: Vec<ActorRt>,
@@ -216,6 +220,7 @@ impl World {
                 brake_pending,
                 brake_at_s: f64::INFINITY,
                 end_at_s: f64::INFINITY,
+                gap_settled_since_s: f64::INFINITY,
                 removed: false,
                 traffic_frame: 0,
                 signals: 0,
@@ -238,13 +243,29 @@ impl World {
         };
         let mut step_order: Vec<usize> = (0..actors.len()).collect();
         step_order.sort_by_key(|&i| (depth(i), i));
-        let track_route = scenario.actors.iter().any(
-            |a| matches!(&a.motion, ActorMotion::Scripted(p) if matches!(p.trigger, Trigger::EgoEta { .. })),
-        );
+        // The ego's route progress is needed by time-to-conflict triggers, pacing and brakes on
+        // the ego's gap or ETA.
+        let track_route = scenario.actors.iter().any(|a| match &a.motion {
+            ActorMotion::Scripted(p) => {
+                matches!(p.trigger, Trigger::EgoEta { .. })
+                    || p.pace.is_some()
+                    || p.brake.is_some_and(|b| {
+                        matches!(
+                            b.when,
+                            BrakeWhen::EgoGap { .. }
+                                | BrakeWhen::EgoTimeGap { .. }
+                                | BrakeWhen::EgoTtc { .. }
+                                | BrakeWhen::EgoEta { .. }
+                        )
+                    })
+            }
+            _ => false,
+        });
         let mut w = World {
             map: scenario.map.clone(),
             params,
             seed,
+            variation_seed: seed,
             ego,
             ego_view,
             views: Vec::with_capacity(actors.len()),
@@ -303,7 +324,12 @@ impl World {
             }
             let Motion::Scripted(p) = &self.actors[i].motion else { continue };
             let fire = self.actors[i].phase == Phase::Waiting && self.trigger_fires(&p.trigger, t);
+            let rel = self.ego_relative(i, t);
             let a = &mut self.actors[i];
+            a.gap_settled_since_s = match rel.gap_settled {
+                Some(true) => a.gap_settled_since_s.min(t),
+                _ => f64::INFINITY,
+            };
             let Motion::Scripted(p) = &a.motion else { continue };
             let before = a.view.pose;
             let removed = step_scripted(
@@ -316,6 +342,7 @@ impl World {
                 p,
                 t,
                 fire,
+                rel,
                 &mut triggered,
             );
             if a.brake_at_s.is_infinite() && matches!(a.phase, Phase::Braking | Phase::Holding { .. }) {
@@ -386,6 +413,106 @@ impl World {
         self.ego_route_s
     }
 
+    /// Arc length along the ego route of a point beside it near the ego (None: farther than
+    /// [`ETA_MAX_OFFSET_M`] from the route); before the route start / past its end the
+    /// distance along the first / last direction (negative before the start).
+    fn along_ego_route(&self, pos: Vec2) -> Option<f64> {
+        let r = &self.ego_route;
+        let s0 = self.ego_route_s;
+        let pr = r.project_within(pos, s0 - 100.0, s0 + 400.0)?;
+        let len = r.length();
+        let s = if pr.s <= 1e-6 {
+            (pos - r.point_at(0.0)).dot(Vec2::from_angle(r.heading_at(0.0)))
+        } else if pr.s >= len - 1e-6 {
+            len + (pos - r.point_at(len)).dot(Vec2::from_angle(r.heading_at(len)))
+        } else {
+            pr.s
+        };
+        (pr.distance <= ETA_MAX_OFFSET_M).then_some(s)
+    }
+
+    /// The ego-relative inputs of scripted actor `i` at time `t`: its pace speed and whether an
+    /// ego-relative or chained brake is due.
+    fn ego_relative(&self, i: usize, t: f64) -> EgoRelative {
+        let a = &self.actors[i];
+        let Motion::Scripted(p) = &a.motion else { return EgoRelative::default() };
+        let needs_gap = p.pace.is_some_and(|q| matches!(q.mode, PaceMode::Gap { .. }))
+            || p.brake.is_some_and(|b| {
+                matches!(
+                    b.when,
+                    BrakeWhen::EgoGap { .. } | BrakeWhen::EgoTimeGap { .. } | BrakeWhen::EgoTtc { .. }
+                )
+            });
+        if a.phase == Phase::Waiting && p.brake.is_none() || a.phase == Phase::Done {
+            return EgoRelative::default();
+        }
+        let v_ego = self.ego.speed_mps;
+        // Bumper gap from the ego's front to the actor's rear along the ego route.
+        let gap = if needs_gap {
+            self.along_ego_route(a.view.pose.pos)
+                .map(|s| s - self.ego_route_s - 0.5 * (self.params.length_m + a.view.length_m))
+        } else {
+            None
+        };
+        let mut out = EgoRelative::default();
+        let pacing = a.phase == Phase::Moving && (a.brake_pending || p.brake.is_none());
+        if let Some(q) = p.pace.filter(|q| pacing && a.s < q.until_s) {
+            let target = match q.mode {
+                PaceMode::Gap { gap_m, gap_s } => gap.map(|g| {
+                    let want = gap_m + gap_s * v_ego;
+                    out.gap_settled = Some((g - want).abs() <= PACE_SETTLED_M.max(0.15 * want.abs()));
+                    v_ego - PACE_GAIN_PER_S * (g - want)
+                }),
+                PaceMode::Meet { route_s, actor_s, offset_s, .. } => {
+                    // The ego's ETA to the point (negative once past it: seconds since).
+                    let left = actor_s - a.s;
+                    let ego_left = route_s - self.ego_route_s;
+                    if left <= 0.0 {
+                        None
+                    } else {
+                        let t_arrive = ego_left / v_ego.max(ETA_MIN_SPEED_MPS) + offset_s;
+                        Some(if t_arrive <= 0.05 { f64::INFINITY } else { left / t_arrive })
+                    }
+                }
+            };
+            out.pace_mps = target.map(|v| v.clamp(q.min_speed_mps, q.max_speed_mps));
+        }
+        if let Some(b) = p.brake.filter(|_| a.brake_pending && a.phase == Phase::Moving) {
+            let pos = a.view.pose.pos;
+            out.brake_due = match b.when {
+                BrakeWhen::AtS(_) | BrakeWhen::AfterS(_) => false,
+                BrakeWhen::EgoWithin { radius_m, point } => {
+                    self.ego.pose.pos.dist_sq(point.unwrap_or(pos)) <= radius_m * radius_m
+                }
+                BrakeWhen::EgoGap { gap_m } => gap.is_some_and(|g| g <= gap_m),
+                BrakeWhen::EgoTimeGap { gap_s } => gap.is_some_and(|g| g <= gap_s * v_ego),
+                BrakeWhen::EgoTtc { ttc_s } => {
+                    let closing = v_ego - a.view.speed_mps;
+                    gap.is_some_and(|g| closing > 1e-3 && g <= ttc_s * closing)
+                }
+                BrakeWhen::EgoEta { eta_s, route_s, .. } => {
+                    let d = route_s - self.ego_route_s;
+                    d > 0.0 && d / v_ego.max(ETA_MIN_SPEED_MPS) <= eta_s
+                }
+                BrakeWhen::GapHeld { held_s } => t - a.gap_settled_since_s >= held_s - 1e-9,
+                BrakeWhen::After { actor, event, delay_s } => self.event_passed(actor, event, delay_s, t),
+            };
+        }
+        out
+    }
+
+    /// Whether `delay_s` has passed since `event` of scenario actor `actor` at time `t`.
+    fn event_passed(&self, actor: usize, event: ChainEvent, delay_s: f64, t: f64) -> bool {
+        let Some(o) = self.actors.get(actor) else { return false };
+        let at = match event {
+            ChainEvent::Start if o.phase != Phase::Waiting => o.triggered_at_s,
+            ChainEvent::Start => f64::INFINITY,
+            ChainEvent::Brake => o.brake_at_s,
+            ChainEvent::End => o.end_at_s,
+        };
+        t >= at + delay_s - 1e-9
+    }
+
     /// Whether a waiting actor's start trigger fires at time `t`.
     fn trigger_fires(&self, trigger: &Trigger, t: f64) -> bool {
         match *trigger {
@@ -395,16 +522,7 @@ impl World {
                 let d = route_s - self.ego_route_s;
                 d > 0.0 && d / self.ego.speed_mps.max(ETA_MIN_SPEED_MPS) <= eta_s
             }
-            Trigger::After { actor, event, delay_s } => {
-                let Some(o) = self.actors.get(actor) else { return false };
-                let at = match event {
-                    ChainEvent::Start if o.phase != Phase::Waiting => o.triggered_at_s,
-                    ChainEvent::Start => f64::INFINITY,
-                    ChainEvent::Brake => o.brake_at_s,
-                    ChainEvent::End => o.end_at_s,
-                };
-                t >= at + delay_s - 1e-9
-            }
+            Trigger::After { actor, event, delay_s } => self.event_passed(actor, event, delay_s, t),
         }
     }
 
@@ -485,6 +603,7 @@ impl World {
             brake_pending: false,
             brake_at_s: f64::INFINITY,
             end_at_s: f64::INFINITY,
+            gap_settled_since_s: f64::INFINITY,
             removed: false,
             traffic_frame,
             signals,
@@ -519,6 +638,7 @@ impl World {
             actors: &self.views[..n],
             map: &self.map,
             lights: self.lights.views(),
+            variation_seed: self.variation_seed,
         };
         self.traffic_buf.clear();
         let res = match start {
@@ -689,6 +809,14 @@ impl World {
     pub fn seed(&self) -> u64 {
         self.seed
     }
+    /// Sets the variation seed the traffic demand is played with (default: the world seed);
+    /// call before attaching traffic.
+    pub fn set_variation_seed(&mut self, v: u64) {
+        self.variation_seed = v;
+    }
+    pub fn variation_seed(&self) -> u64 {
+        self.variation_seed
+    }
 }
 
 /// Whether the segment `from` → `to.pos` crosses the stop line of a red head in its direction.
@@ -707,6 +835,17 @@ fn crossed_red_stop_line(heads: &[TrafficLightView], from: Vec2, to: Pose) -> bo
     })
 }
 
+/// The ego-relative inputs of one scripted-actor step.
+#[derive(Debug, Clone, Copy, Default)]
+struct EgoRelative {
+    /// Speed its `pace` asks for now (None: not pacing, the leg speed applies).
+    pace_mps: Option<f64>,
+    /// An ego-relative or chained brake condition holds now.
+    brake_due: bool,
+    /// Gap pacing: whether the gap is within tolerance of its target (None: not measured).
+    gap_settled: Option<bool>,
+}
+
 /// One scripted-actor step (`fire`: its start trigger holds now); returns true when the actor
 /// leaves the world.
 #[allow(clippy::too_many_arguments)]
@@ -720,6 +859,7 @@ fn step_scripted(
     p: &ScriptedPath,
     t: f64,
     fire: bool,
+    rel: EgoRelative,
     triggered: &mut Vec<u32>,
 ) -> bool {
     let prev_speed = view.speed_mps;
@@ -738,6 +878,7 @@ fn step_scripted(
             let due = match when {
                 BrakeWhen::AtS(at) => *s >= at,
                 BrakeWhen::AfterS(dt) => t - *triggered_at_s >= dt - 1e-9,
+                _ => rel.brake_due,
             };
             if due {
                 *brake_pending = false;
@@ -768,7 +909,7 @@ fn step_scripted(
             }
         }
         Phase::Moving => {
-            let target = p.leg_speed(*s);
+            let target = rel.pace_mps.unwrap_or_else(|| p.leg_speed(*s));
             let dv = p.accel_mps2 * DT_S;
             v = if v < target { (v + dv).min(target) } else { (v - dv).max(target) };
         }
@@ -790,7 +931,8 @@ fn step_scripted(
         v = 0.0;
     }
     view.speed_mps = v;
-    view.braking = v < prev_speed - 1e-9;
+    // Brake lamps: lit while slowing down, and while standing after that until it drives off.
+    view.braking = v < prev_speed - 1e-9 || (v <= 1e-9 && view.braking);
     view.pose = path_pose(&p.path, *s, smoothing_m(view.length_m));
     false
 }

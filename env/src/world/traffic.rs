@@ -81,6 +81,9 @@ pub struct TrafficInput<'a> {
     /// The world's signal heads (their colours as of this tick when the model does not drive
     /// the lights).
     pub lights: &'a [crate::view::TrafficLightView],
+    /// The episode's variation seed: the demand is played as `TrafficDemand::varied` of it
+    /// (0 = as written).
+    pub variation_seed: u64,
 }
 
 /// A background-traffic model plugged into the world (see the module docs).

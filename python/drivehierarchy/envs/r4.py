@@ -169,7 +169,10 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
             # First SUMO env of the process on libsumo, the others ("auto") on TraCI.
             self._close_traffic()
             self._configure_traffic()
-        obs, info = self._sim.reset(world_seed)
+        # The scenario's variation follows the given seed itself: seed 0 plays the scenario as
+        # written, other seeds jitter it within its `[variation]` bounds; unseeded resets vary.
+        variation = int(seed) if seed is not None else world_seed
+        obs, info = self._sim.reset(world_seed, variation)
         self._last_frame = None
         self._live = True
         return self._shape_obs(obs), info

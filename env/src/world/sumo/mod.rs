@@ -287,8 +287,8 @@ impl SumoCoSim {
     }
 
     /// The SUMO route file of an episode.
-    pub fn routes_xml(&self, seed: u64) -> String {
-        self.demand.sumo_routes_xml(&self.map, seed, &self.ego, &self.mirrors)
+    pub fn routes_xml(&self, seed: u64, variation_seed: u64) -> String {
+        self.demand.varied(variation_seed).sumo_routes_xml(&self.map, seed, &self.ego, &self.mirrors)
     }
 
     /// For each light, the phase and its remaining time that its program (the map's, or the
@@ -450,7 +450,7 @@ impl TrafficModel for SumoCoSim {
         self.in_sumo.clear();
         self.out.clear();
         self.lights.clear();
-        let routes = self.routes_xml(seed);
+        let routes = self.routes_xml(seed, input.variation_seed);
         self.fill_movers(input);
         let session = self.session.clone();
         let mut s = lock(&session);
