@@ -15,7 +15,9 @@ QUEUE = builtin_root() / "r4" / "06_traffic_flow" / "town01_03_stop_and_go_queue
 
 
 def _copy(tmp_path: Path, old: str, new: str, name: str) -> tuple[Path, str]:
-    text = QUEUE.read_text(encoding="utf-8").replace('"../../maps/', f'"{(builtin_root() / "maps").as_posix()}/')
+    text = QUEUE.read_text(encoding="utf-8").replace(
+        '"../../maps/', f'"{(builtin_root() / "maps").as_posix()}/'
+    )
     assert old in text
     text = text.replace(old, new, 1)
     p = tmp_path / f"{name}.toml"
@@ -48,12 +50,18 @@ def test_the_shipped_scene_validates(tmp_path: Path) -> None:
             "traffic.flows[0].depart_lane",
             'lane "W2C_0" is closed to vehicle class passenger (lanes of "W2C" open to it: 1, 2)',
         ),
-        ("depart_lane = 2", "depart_lane = 5", "5", "traffic.flows[0].depart_lane", 'edge "W2C" has no lane 5'),
-        # No U-turn from C2W back onto W2C's successor: the `to` key is named, not the header.
+        (
+            "depart_lane = 2",
+            "depart_lane = 5",
+            "5",
+            "traffic.flows[0].depart_lane",
+            'edge "W2C" has no lane 5',
+        ),
+        # The oncoming flow cannot turn back onto W2C: the `to` key is named, not the header.
         ('to = "C2W"', 'to = "W2C"', '"W2C"', "traffic.flows[1].to", "not reachable"),
         # A single vehicle's depart lane.
         (
-            "[[traffic.flows]]\nid = \"oncoming\"",
+            '[[traffic.flows]]\nid = "oncoming"',
             '[[traffic.vehicles]]\nid = "parked"\nroute = ["C2T"]\ndepart_lane = 0\n\n'
             '[[traffic.flows]]\nid = "oncoming"',
             "0",
@@ -63,7 +71,13 @@ def test_the_shipped_scene_validates(tmp_path: Path) -> None:
     ],
 )
 def test_validate_names_line_field_and_value(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], old: str, new: str, value: str, field: str, message: str
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    old: str,
+    new: str,
+    value: str,
+    field: str,
+    message: str,
 ) -> None:
     p, text = _copy(tmp_path, old, new, "broken")
     assert main(["scenario", "validate", str(p)]) == 1
