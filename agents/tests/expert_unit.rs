@@ -192,3 +192,56 @@ fn degenerate_input_stops_without_panicking() {
     let err = Expert::new(bad).unwrap_err().to_string();
     assert!(err.contains("cruise_speed_mps"), "{err}");
 }
+
+/// A car in the next lane of a bend, passing the standing ego, is predicted along its lane (the
+/// route's frame), not on a straight line that would carry it across the ego's lane: the ego
+/// drives off instead of waiting for the stream to end (the official scenes VJHU / ERIR).
+#[test]
+fn traffic_in_the_next_lane_of_a_bend_does_not_hold_the_ego() {
+    // Left bend of radius 30 m from x = 10; the ego stands at its start.
+    let route = RouteBuilder::new(Vec2::ZERO, 0.0).straight(10.0).arc(30.0, 90.0).straight(50.0).build();
+    let ego = ego_at(Vec2::new(10.0, 0.0), 0.0, 0.0);
+    // In the lane to the left (3.5 m inside the bend), beside the ego, at 8 m/s along its lane:
+    // a straight line from there leaves the inner lane and crosses the ego's within 1–2 s.
+    let (r, ang) = (26.5f64, 0.1f64);
+    let centre = Vec2::new(10.0, 30.0);
+    let pos = centre + Vec2::new(ang.sin(), -ang.cos()) * r;
+    let car = actor(5, ActorKind::Car, pos, ang, 8.0, 4.6, 1.9);
+    let a = decide(&route, &ego, &[car], &[]);
+    assert!(a.target_speed_mps > 1.0, "held by the next lane's car: {a:?}");
+    // The same car steering towards the ego's lane (a cut-in) still holds it.
+    let cut_in = actor(5, ActorKind::Car, pos, ang - 0.45, 8.0, 4.6, 1.9);
+    let a = decide(&route, &ego, &[cut_in], &[]);
+    let held_by_it =
+        matches!(a.reason, SpeedReason::Obstacle { actor_id: 5 } | SpeedReason::Lead { actor_id: 5 });
+    assert!(a.target_speed_mps < 1.0 && held_by_it, "{a:?}");
+}
+
+/// Queued behind a car crawling up to a red light (too slow to follow), the ego creeps after
+/// the stall-guard time like it does behind a standing one; the protocol's blocked rule has no
+/// exception for red lights.
+#[test]
+fn stalled_behind_a_crawling_queue_the_ego_creeps() {
+    let route = straight();
+    let p = ExpertParams::default();
+    let mut ex = Expert::new(p.clone()).unwrap();
+    // Ego front at 50 m; the queue's last car's rear at 53.3 m (closer than the stop gap),
+    // crawling at 0.3 m/s.
+    let ego = ego_at(Vec2::new(47.7, 0.0), 0.0, 0.0);
+    let car = actor(6, ActorKind::Car, Vec2::new(55.6, 0.0), 0.0, 0.3, 4.6, 1.9);
+    let lights = [light(Vec2::new(90.0, 0.0), 0.0, LightColor::Red)];
+    let mut targets = Vec::new();
+    for _ in 0..((p.stall_guard_s / p.decision_period_s) as usize + 2) {
+        let a = ex.act(&ExpertInput {
+            ego: &ego,
+            route: &route,
+            actors: &[car],
+            lights: &lights,
+            speed_limit_mps: None,
+            drivable: None,
+        });
+        targets.push(a.target_speed_mps);
+    }
+    assert!(targets[0] < p.creep_speed_mps, "{targets:?}");
+    assert_eq!(*targets.last().unwrap(), p.creep_speed_mps, "{targets:?}");
+}

@@ -305,3 +305,122 @@ fn awkward_numbers_never_panic() {
     }
     assert!(loaded > 0);
 }
+
+/// A town01 scenario (the shipped network, with its sidewalk lanes) with `traffic` appended,
+/// written to a temporary file; returns the path and the text.
+fn town01_variant(tag: &str, traffic: &str) -> (PathBuf, String) {
+    let map = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios/maps/town01/town01.net.xml");
+    let text = format!(
+        "version = 1\nid = \"{tag}\"\nname = \"t\"\ncategory = \"06_traffic_flow\"\ndescription = \"d\"\n\
+         map = {:?}\nreference_duration_s = 50.0\n\n[ego]\nstart = {{ lane = \"C2T_1\", s = 30.0 }}\n\
+         destination = {{ lane = \"T2E_0\", s = 30.0 }}\nspeed_mps = 8.0\n\n{traffic}",
+        map.display().to_string()
+    );
+    let dir = std::env::temp_dir().join(format!("dh_scenario_errors_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join(format!("{tag}.toml"));
+    std::fs::write(&p, &text).unwrap();
+    (p, text)
+}
+
+/// The 1-based line and column of the first occurrence of `needle` in `text`.
+fn where_is(text: &str, needle: &str) -> (usize, usize) {
+    let off = text.find(needle).unwrap_or_else(|| panic!("{needle} not in the text"));
+    let line = text[..off].matches('\n').count() + 1;
+    let col = off - text[..off].rfind('\n').map_or(0, |i| i + 1) + 1;
+    (line, col)
+}
+
+/// The error of `validate` (what `drivehierarchy scenario validate` runs) must start with
+/// `file:line:column: field `field` = value:`, at the value of that key.
+fn assert_located(p: &std::path::Path, text: &str, value_at: &str, field: &str, value: &str, msg: &str) {
+    let e = validate(p).expect_err("must fail").to_string();
+    let (l, c) = where_is(text, value_at);
+    let c = c + value_at.find(value).unwrap_or(0);
+    let want = format!("{}:{l}:{c}: field `{field}` = {value}: ", p.display());
+    assert!(e.starts_with(&want), "want prefix {want:?}, got {e}");
+    assert!(e.contains(msg), "{e}");
+}
+
+const LEFT_LANE_FLOW: &str =
+    "[traffic]\nmode = \"sumo\"\nwarmup_s = 3.0\n\n[[traffic.flows]]\nid = \"left_lane\"\n\
+     from = \"W2C\"\nto = \"T2E\"\ndepart_lane = 2\nvehs_per_hour = 720\nbegin_s = -3.0\n";
+
+/// SUMO refuses a route file whose vehicle departs on a lane that does not exist or is closed
+/// to its class ("Invalid departLane definition", naming no file): validation catches both, at
+/// the `depart_lane` key, for flows and single vehicles.
+#[test]
+fn depart_lane_must_exist_and_be_open_to_the_class() {
+    let (p, t) = town01_variant("dl_ok", LEFT_LANE_FLOW);
+    validate(&p).unwrap_or_else(|e| panic!("{e}"));
+    // Lane 0 of W2C is town01's sidewalk (pedestrians only).
+    let (p, t0) =
+        town01_variant("dl_sidewalk", &LEFT_LANE_FLOW.replace("depart_lane = 2", "depart_lane = 0"));
+    assert_located(
+        &p,
+        &t0,
+        "depart_lane = 0",
+        "traffic.flows[0].depart_lane",
+        "0",
+        "lane \"W2C_0\" is closed to vehicle class passenger (lanes of \"W2C\" open to it: 1, 2)",
+    );
+    let (p, t5) = town01_variant("dl_missing", &LEFT_LANE_FLOW.replace("depart_lane = 2", "depart_lane = 5"));
+    assert_located(
+        &p,
+        &t5,
+        "depart_lane = 5",
+        "traffic.flows[0].depart_lane",
+        "5",
+        "edge \"W2C\" has no lane 5",
+    );
+    assert_ne!(t, t0);
+    // The same for `[[traffic.vehicles]]`.
+    let veh =
+        "[traffic]\nmode = \"native\"\n\n[[traffic.vehicles]]\nid = \"v\"\nroute = [\"C2T\", \"T2E\"]\n\
+               depart_lane = 0\ndepart_pos_m = 100.0\n";
+    let (p, tv) = town01_variant("dl_vehicle", veh);
+    assert_located(
+        &p,
+        &tv,
+        "depart_lane = 0",
+        "traffic.vehicles[0].depart_lane",
+        "0",
+        "closed to vehicle class",
+    );
+    let (p, tv) = town01_variant("dl_vehicle9", &veh.replace("depart_lane = 0", "depart_lane = 9"));
+    assert_located(&p, &tv, "depart_lane = 9", "traffic.vehicles[0].depart_lane", "9", "has no lane 9");
+    // A class the lane admits is fine: pedestrians are not vehicles, but a bicycle type on a
+    // car lane is (town01's road lanes only exclude pedestrians).
+    let (p, _) = town01_variant(
+        "dl_bike",
+        &veh.replace("depart_lane = 0", "depart_lane = 1")
+            .replace("id = \"v\"", "id = \"v\"\nvtype = \"bicycle\""),
+    );
+    validate(&p).unwrap_or_else(|e| panic!("{e}"));
+}
+
+/// An unreachable `to` (or `via`) of a flow is reported at that key, not the table header.
+#[test]
+fn unreachable_flow_is_located_at_its_key() {
+    let flow = |from: &str, via: &str, to: &str| {
+        format!("{}\n[traffic]\nmode = \"native\"\n\n[[traffic.flows]]\nfrom = \"{from}\"\n{via}to = \"{to}\"\nvehs_per_hour = 100.0\n", fixture_text())
+    };
+    for (tag, text, at, field, value) in [
+        ("to", flow("N_in", "", "C_N"), "to = \"C_N\"", "traffic.flows[0].to", "\"C_N\""),
+        (
+            "via",
+            flow("N_in", "via = [\"C_S\", \"C_N\"]\n", "C_N"),
+            "\"C_N\"]",
+            "traffic.flows[0].via[1]",
+            "\"C_N\"",
+        ),
+        ("from", flow("X_in", "", "C_N"), "from = \"X_in\"", "traffic.flows[0].from", "\"X_in\""),
+    ] {
+        let dir = std::env::temp_dir().join(format!("dh_scenario_errors_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join(format!("flow_{tag}.toml"));
+        std::fs::write(&p, &text).unwrap();
+        let msg = if tag == "from" { "no such edge" } else { "not reachable" };
+        assert_located(&p, &text, at, field, value, msg);
+    }
+}

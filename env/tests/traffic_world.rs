@@ -140,3 +140,90 @@ fn scenarios_without_a_traffic_table_have_no_demand() {
     assert_eq!(s.traffic.mode, TrafficMode::None);
     assert!(s.traffic.is_empty());
 }
+
+/// A town01 scenario in native traffic mode: `ego` is the `[ego]` table body, `rest` is
+/// appended (actors, traffic).
+fn native_town01(tag: &str, ego: &str, rest: &str) -> dh_env::scenario::ResolvedScenario {
+    let map = scenarios().join("maps/town01/town01.net.xml");
+    let text = format!(
+        "version = 1\nid = \"{tag}\"\nname = \"t\"\ncategory = \"06_traffic_flow\"\ndescription = \"d\"\n\
+         map = {:?}\nreference_duration_s = 50.0\n\n[ego]\n{ego}\n{rest}",
+        map.display().to_string()
+    );
+    let dir = std::env::temp_dir().join(format!("dh_traffic_world_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join(format!("{tag}.toml"));
+    std::fs::write(&p, text).unwrap();
+    Scenario::load(&p).unwrap_or_else(|e| panic!("{tag}: {e}"))
+}
+
+/// Runs `secs` with the ego holding `v` m/s straight on; returns every contact (time, id) and
+/// the number of traffic vehicles seen.
+fn run_native(s: &dh_env::scenario::ResolvedScenario, v: f64, secs: f64) -> (Vec<(f64, u32)>, usize) {
+    let mut w = World::new(s, 0).unwrap();
+    w.attach_traffic(Box::new(dh_env::world::idm::IdmTraffic::new(s).unwrap())).unwrap();
+    let mut contacts = Vec::new();
+    let mut seen = std::collections::BTreeSet::new();
+    for _ in 0..(secs / dh_env::DT_S).round() as usize {
+        let e = v - w.ego().speed_mps;
+        let c =
+            Control { throttle: (0.5 * e).clamp(0.0, 1.0), brake: (-0.5 * e).clamp(0.0, 1.0), steer: 0.0 };
+        let r = w.tick(&c).unwrap();
+        contacts.extend(r.contacts.iter().map(|&(id, _)| (r.time_s, id)));
+        seen.extend(w.actors().iter().filter(|a| w.is_traffic_actor(a.id)).map(|a| a.id));
+    }
+    (contacts, seen.len())
+}
+
+/// Native insertion waits, as SUMO's does, until the departure spot is free: a flow in the
+/// ego's own lane never places (or, after the warm-up, queues) a car into the ego or into a
+/// scripted actor standing on its departure spot.
+#[test]
+fn native_insertion_never_overlaps_the_ego_or_an_actor() {
+    let flow =
+        "[traffic]\nmode = \"native\"\nwarmup_s = 3.0\n\n[[traffic.flows]]\nid = \"mine\"\nfrom = \"C2T\"\n\
+                to = \"T2E\"\ndepart_lane = 1\nvehs_per_hour = 1800\nbegin_s = -3.0\n";
+    // The ego 30 m into the lane, driving off at 8 m/s at t = 0 (it stands during the warm-up).
+    let s = native_town01(
+        "own_lane",
+        "start = { lane = \"C2T_1\", s = 30.0 }\nspeed_mps = 8.0\nroute_edges = [\"C2T\", \"T2E\"]",
+        flow,
+    );
+    let (contacts, n) = run_native(&s, 8.0, 20.0);
+    assert!(contacts.is_empty(), "{contacts:?}");
+    assert!(n >= 5, "the flow inserts once there is room: {n} vehicles");
+    // The ego standing right on the departure spot: nothing departs until it has left.
+    let s = native_town01(
+        "on_spot",
+        "start = { lane = \"C2T_1\", s = 3.0 }\nroute_edges = [\"C2T\", \"T2E\"]",
+        flow,
+    );
+    let (contacts, n) = run_native(&s, 6.0, 20.0);
+    assert!(contacts.is_empty(), "{contacts:?}");
+    assert!(n >= 3, "{n}");
+    // A scripted car parked on the departure spot (never triggered): the flow waits behind it
+    // for ever, it never spawns into it.
+    let parked = format!(
+        "[[actors]]\nkind = \"car\"\nroute = {{ lanes = [\"C2T_1\"], start_s = 4.0 }}\nspeed_mps = 5.0\n\
+         start = {{ time_s = 1000.0 }}\n{flow}"
+    );
+    let s = native_town01(
+        "actor_spot",
+        "start = { lane = \"C2T_1\", s = 60.0 }\nroute_edges = [\"C2T\", \"T2E\"]",
+        &parked,
+    );
+    let mut w = World::new(&s, 0).unwrap();
+    w.attach_traffic(Box::new(dh_env::world::idm::IdmTraffic::new(&s).unwrap())).unwrap();
+    for _ in 0..200 {
+        w.tick(&Control::default()).unwrap();
+        let actor = w.actors().iter().find(|a| !w.is_traffic_actor(a.id)).unwrap().footprint();
+        for t in w.actors().iter().filter(|a| w.is_traffic_actor(a.id)) {
+            let d = t.pose.pos.dist(actor.pose.pos);
+            assert!(
+                d > 0.5 * (t.length_m + 2.0 * actor.half_length),
+                "vehicle {} inside the parked car: {d:.2} m",
+                t.id
+            );
+        }
+    }
+}

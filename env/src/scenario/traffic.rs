@@ -414,12 +414,22 @@ impl Rx<'_> {
         if ids.is_empty() {
             return Err(self.err(field, "[]", "needs at least one edge"));
         }
+        self.route_fields(&|i| format!("{field}[{i}]"), ids, vclass)
+    }
+    /// [`Rx::route`] with the field of the `i`-th id given by `field_of` (errors point at the
+    /// key that names the edge, e.g. a flow's `to`).
+    fn route_fields(
+        &self,
+        field_of: &dyn Fn(usize) -> String,
+        ids: &[String],
+        vclass: VClass,
+    ) -> Result<Vec<EdgeIdx>> {
         let mut out: Vec<EdgeIdx> = Vec::new();
         for (i, id) in ids.iter().enumerate() {
-            let e = self.edge(&format!("{field}[{i}]"), id)?;
+            let e = self.edge(&field_of(i), id)?;
             if !edge_allows(self.map, e, vclass) {
                 return Err(self.err(
-                    format!("{field}[{i}]"),
+                    field_of(i),
                     format!("\"{id}\""),
                     format!("no lane allows vehicle class {}", vclass.sumo_name()),
                 ));
@@ -429,7 +439,7 @@ impl Rx<'_> {
                 Some(&prev) => {
                     let leg = self.map.edge_route(prev, e, vclass).ok_or_else(|| {
                         self.err(
-                            format!("{field}[{i}]"),
+                            field_of(i),
                             format!("\"{id}\""),
                             format!(
                                 "not reachable from \"{}\" for class {}",
@@ -506,7 +516,16 @@ impl Rx<'_> {
         vtypes.push(t);
         Ok((vtypes.len() - 1, factor))
     }
-    fn lane(&self, field: &str, l: &Option<LaneChoice>) -> Result<LaneChoice> {
+    /// `depart_lane`: a SUMO name, or the index of a lane of the first edge that is open to
+    /// `vclass` and from which the route can be driven (SUMO refuses the whole route file
+    /// otherwise; the native model would drive on it regardless).
+    fn lane(
+        &self,
+        field: &str,
+        l: &Option<LaneChoice>,
+        edges: &[EdgeIdx],
+        vclass: VClass,
+    ) -> Result<LaneChoice> {
         match l {
             None => Ok(LaneChoice::Named("best".into())),
             Some(LaneChoice::Named(n)) if !LANE_NAMES.contains(&n.as_str()) => Err(self.err(
@@ -514,6 +533,56 @@ impl Rx<'_> {
                 format!("\"{n}\""),
                 format!("expected a lane index or one of {}", LANE_NAMES.join(", ")),
             )),
+            Some(LaneChoice::Index(i)) => {
+                let edge = &self.map.edges[edges[0]];
+                let open: Vec<String> = edge
+                    .lanes
+                    .iter()
+                    .filter(|&&l| self.map.lanes[l].allow.contains(vclass))
+                    .map(|&l| self.map.lanes[l].index.to_string())
+                    .collect();
+                let Some(&lane) = edge.lanes.iter().find(|&&l| self.map.lanes[l].index == *i as usize) else {
+                    return Err(self.err(
+                        field,
+                        i,
+                        format!(
+                            "edge \"{}\" has no lane {i} (lanes 0 … {}; open to class {}: {})",
+                            edge.id,
+                            edge.lanes.len().saturating_sub(1),
+                            vclass.sumo_name(),
+                            open.join(", ")
+                        ),
+                    ));
+                };
+                if !self.map.lanes[lane].allow.contains(vclass) {
+                    return Err(self.err(
+                        field,
+                        i,
+                        format!(
+                            "lane \"{}\" is closed to vehicle class {} (lanes of \"{}\" open to it: {})",
+                            self.map.lanes[lane].id,
+                            vclass.sumo_name(),
+                            edge.id,
+                            open.join(", ")
+                        ),
+                    ));
+                }
+                if let Err(e) = self.map.route_lanes_for(edges, Some(lane), vclass) {
+                    let msg = match e {
+                        Error::Map { message, .. } => message,
+                        other => other.to_string(),
+                    };
+                    return Err(self.err(
+                        field,
+                        i,
+                        format!(
+                            "the route cannot be driven from lane \"{}\": {msg}",
+                            self.map.lanes[lane].id
+                        ),
+                    ));
+                }
+                Ok(LaneChoice::Index(*i))
+            }
             Some(c) => Ok(c.clone()),
         }
     }
@@ -596,7 +665,9 @@ pub fn resolve_traffic(
     for (i, v) in spec.vehicles.iter().enumerate() {
         let f = format!("traffic.vehicles[{i}]");
         let vtype = rx.vtype(&format!("{f}.vtype"), v.vtype.as_deref(), &vtypes)?;
-        let edges = rx.route(&format!("{f}.route"), &v.route, vtypes[vtype].vclass)?;
+        let vclass = vtypes[vtype].vclass;
+        let edges = rx.route(&format!("{f}.route"), &v.route, vclass)?;
+        let depart_lane = rx.lane(&format!("{f}.depart_lane"), &v.depart_lane, &edges, vclass)?;
         let id = v.id.clone().unwrap_or_else(|| format!("veh{i}"));
         let (vtype, speed_factor) =
             rx.speed_vtype(&f, &mut vtypes, vtype, &id, v.max_speed_mps, v.speed_factor)?;
@@ -611,7 +682,7 @@ pub fn resolve_traffic(
             depart_pos_m: rx.depart_pos(&format!("{f}.depart_pos_m"), v.depart_pos_m, &edges)?,
             edges,
             depart_s,
-            depart_lane: rx.lane(&format!("{f}.depart_lane"), &v.depart_lane)?,
+            depart_lane,
             depart_speed: rx.speed(&format!("{f}.depart_speed"), &v.depart_speed)?,
         });
     }
@@ -622,7 +693,15 @@ pub fn resolve_traffic(
         let mut names = vec![fl.from.clone()];
         names.extend(fl.via.iter().cloned());
         names.push(fl.to.clone());
-        let edges = rx.route(&format!("{f}.from/via/to"), &names, vtypes[vtype].vclass)?;
+        let vclass = vtypes[vtype].vclass;
+        let n_via = fl.via.len();
+        let field_of = |k: usize| match k {
+            0 => format!("{f}.from"),
+            k if k <= n_via => format!("{f}.via[{}]", k - 1),
+            _ => format!("{f}.to"),
+        };
+        let edges = rx.route_fields(&field_of, &names, vclass)?;
+        let depart_lane = rx.lane(&format!("{f}.depart_lane"), &fl.depart_lane, &edges, vclass)?;
         let id = fl.id.clone().unwrap_or_else(|| format!("flow{i}"));
         let (vtype, speed_factor) =
             rx.speed_vtype(&f, &mut vtypes, vtype, &id, fl.max_speed_mps, fl.speed_factor)?;
@@ -664,7 +743,7 @@ pub fn resolve_traffic(
                 }
                 (n, _) => n,
             },
-            depart_lane: rx.lane(&format!("{f}.depart_lane"), &fl.depart_lane)?,
+            depart_lane,
             depart_speed: rx.speed(&format!("{f}.depart_speed"), &fl.depart_speed)?,
         });
     }

@@ -13,7 +13,7 @@
 
 use super::lights::LightState;
 use super::traffic::{TrafficAgent, TrafficFrame, TrafficInput, TrafficModel, SIGNAL_BRAKELIGHT};
-use crate::geom::{Polyline, Pose, Vec2};
+use crate::geom::{Obb, Polyline, Pose, Vec2};
 use crate::map::{EdgeFunction, JunctionIdx, LaneIdx, Network};
 use crate::scenario::traffic::{DemandVehicle, FlowRate, LaneChoice, SpeedChoice, SplitMix, TrafficDemand};
 use crate::scenario::{ResolvedScenario, PALETTE};
@@ -211,7 +211,8 @@ impl IdmTraffic {
     }
 
     /// Departs every due vehicle whose departure spot is free (others wait, in order).
-    fn depart(&mut self, ego: Pose) {
+    /// `ego` = (pose, length, width, speed).
+    fn depart(&mut self, ego: (Pose, f64, f64, f64), actors: &[crate::view::ActorView]) {
         let t = self.time_s;
         // Flows produce pending vehicles as their departure times come.
         for (fi, f) in self.demand.flows.iter().enumerate() {
@@ -258,11 +259,25 @@ impl IdmTraffic {
             let s = d.depart_pos_m.unwrap_or(0.0).max(0.5 * vt.length_m).min(route.path.length());
             let pose = path_pose(&route.path, s, vt.length_m);
             let clear = vt.length_m + vt.min_gap_m;
-            let blocked = pose.pos.dist(ego.pos) < clear + 2.5
-                || self
-                    .vehicles
-                    .iter()
-                    .any(|o| o.pose.pos.dist(pose.pos) < clear + 0.5 * self.demand.vtypes[o.vtype].length_m);
+            // As SUMO does, a vehicle is inserted only where its body (with its minimum gap
+            // all round) is free of the ego, the scenario's actors and other traffic; else it
+            // waits for the space.
+            let me = Obb {
+                pose,
+                half_length: 0.5 * vt.length_m + vt.min_gap_m,
+                half_width: 0.5 * vt.width_m + 0.3,
+            };
+            let overlaps = |c: Vec2, yaw: f64, l: f64, w: f64| {
+                obb_overlap(&me, &Obb { pose: Pose::new(c, yaw), half_length: 0.5 * l, half_width: 0.5 * w })
+            };
+            let blocked = pose.pos.dist(ego.0.pos) < clear + 2.5
+                || overlaps(ego.0.pos, ego.0.yaw, ego.1, ego.2)
+                || actors.iter().any(|a| overlaps(a.pose.pos, a.pose.yaw, a.length_m, a.width_m))
+                || self.vehicles.iter().any(|o| {
+                    let t = &self.demand.vtypes[o.vtype];
+                    o.pose.pos.dist(pose.pos) < clear + 0.5 * t.length_m
+                        || overlaps(o.pose.pos, o.pose.yaw, t.length_m, t.width_m)
+                });
             if blocked {
                 i += 1;
                 continue;
@@ -274,6 +289,26 @@ impl IdmTraffic {
                 SpeedChoice::Named(ref n) if n == "random" => self.rng.unit() * v0,
                 SpeedChoice::Named(_) => v0,
             };
+            // Never faster than it can stop behind whatever stands ahead on its path.
+            let bodies = std::iter::once((ego.0, ego.1, ego.2, ego.3))
+                .chain(actors.iter().map(|a| (a.pose, a.length_m, a.width_m, a.speed_mps)))
+                .chain(self.vehicles.iter().map(|o| {
+                    let t = &self.demand.vtypes[o.vtype];
+                    (o.pose, t.length_m, t.width_m, o.v)
+                }));
+            let mut room = f64::INFINITY;
+            for (bp, bl, bw, bv) in bodies {
+                if bp.pos.dist(pose.pos) > LOOKAHEAD_M {
+                    continue;
+                }
+                if let Some((sp, lat)) = route.project_ahead(bp.pos, s, LOOKAHEAD_M) {
+                    if sp > s && lat <= 0.5 * (vt.width_m + bw) + 0.2 {
+                        let gap = sp - s - 0.5 * (vt.length_m + bl) - vt.min_gap_m;
+                        room = room.min(gap + bv * bv / (2.0 * vt.decel_mps2));
+                    }
+                }
+            }
+            let v = v.min((2.0 * vt.decel_mps2 * room.max(0.0)).sqrt());
             let d = self.pending.remove(i);
             self.vehicles.push(Veh {
                 key: self.next_key,
@@ -292,7 +327,7 @@ impl IdmTraffic {
     fn step(&mut self, ego: (Pose, f64, f64, f64), actors: &[crate::view::ActorView]) {
         self.time_s += DT_S;
         self.lights.update(self.time_s);
-        self.depart(ego.0);
+        self.depart(ego, actors);
         // Bodies: (centre, half length, half width, speed) of everything that can block a path.
         self.bodies.clear();
         self.bodies.push((ego.0.pos, 0.5 * ego.1, 0.5 * ego.2, ego.3));
@@ -439,6 +474,24 @@ impl IdmTraffic {
     }
 }
 
+/// Whether two oriented rectangles overlap (separating-axis test).
+fn obb_overlap(a: &Obb, b: &Obb) -> bool {
+    let (ca, cb) = (a.corners(), b.corners());
+    for axis in [a.pose.forward(), a.pose.forward().perp(), b.pose.forward(), b.pose.forward().perp()] {
+        let span = |cs: &[Vec2; 4]| {
+            cs.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), c| {
+                let d = c.dot(axis);
+                (lo.min(d), hi.max(d))
+            })
+        };
+        let ((a0, a1), (b0, b1)) = (span(&ca), span(&cb));
+        if a1 < b0 || b1 < a0 {
+            return false;
+        }
+    }
+    true
+}
+
 fn desired_speed(max_speed: f64, factor: f64, lane_speed: f64) -> f64 {
     max_speed.min(factor * lane_speed).max(0.1)
 }
@@ -481,7 +534,9 @@ impl TrafficModel for IdmTraffic {
         self.pending = pending;
         self.flows = self.demand.flows.iter().map(|f| FlowState { next_s: f.begin_s, count: 0 }).collect();
         let e = input.ego;
-        let ego = (e.pose, e.length_m, e.width_m, e.speed_mps);
+        // The ego stands at its start during the warm-up (its initial speed applies from
+        // t = 0): traffic queues behind a standing car, not one it expects to drive away.
+        let ego = (e.pose, e.length_m, e.width_m, 0.0);
         // Warm-up (the ego standing at its start), ending at t = 0.
         while self.time_s < -1e-9 {
             self.step(ego, input.actors);
