@@ -668,12 +668,12 @@ impl Expert {
         best.1
     }
 
-    /// Signed path curvature at arc `s` (heading change over ±w; > 0 = left).
+    /// Path curvature magnitude at arc `s` (heading change over ±w).
     fn curvature(&self, route: &Polyline, s: f64) -> f64 {
         const W: f64 = 2.5;
         let h0 = (self.path_point(route, s) - self.path_point(route, s - W)).angle();
         let h1 = (self.path_point(route, s + W) - self.path_point(route, s)).angle();
-        wrap_angle(h1 - h0) / W
+        wrap_angle(h1 - h0).abs() / W
     }
 
     /// Highest speed at which the steer needed around arc `s` is reachable in time and the
@@ -686,18 +686,14 @@ impl Expert {
         let ds = 1.0;
         let n = (horizon / ds) as usize;
         let kappa_max = p.max_wheel_angle_rad.tan() / p.wheelbase_m;
-        // Signed: an S-bend (right into a roundabout, then left round it) needs the whole swing
-        // of the wheel from one side to the other.
-        let steer_of = |k: f64| ((p.wheelbase_m * k).atan() / p.max_wheel_angle_rad).clamp(-1.0, 1.0);
+        let steer_of = |k: f64| ((p.wheelbase_m * k).atan() / p.max_wheel_angle_rad).min(1.0);
         let mut best = f64::INFINITY;
-        let ks: Vec<f64> = (0..=n)
-            .map(|i| self.curvature(route, s_front + i as f64 * ds).clamp(-kappa_max, kappa_max))
-            .collect();
+        let ks: Vec<f64> =
+            (0..=n).map(|i| self.curvature(route, s_front + i as f64 * ds).min(kappa_max)).collect();
         let rate = p.steer_rate_usage * p.steer_rate_per_decision / p.decision_period_s;
         let mut envelope = Vec::with_capacity(ks.len());
         const SPAN: usize = 4;
-        for (i, &k_signed) in ks.iter().enumerate() {
-            let k = k_signed.abs();
+        for (i, &k) in ks.iter().enumerate() {
             let d = i as f64 * ds;
             // Tight turns (a junction's corner, radius under ~12 m) are driven at a lower
             // lateral acceleration: the steer-rate-limited wheel lags the path there, and a car
@@ -708,7 +704,7 @@ impl Expert {
             // Steer-rate bound: the steer change over the last SPAN metres must be doable in the
             // time it takes to drive them.
             if i >= SPAN {
-                let du = (steer_of(k_signed) - steer_of(ks[i - SPAN])).abs();
+                let du = (steer_of(k) - steer_of(ks[i - SPAN])).abs();
                 if du > 1e-3 {
                     v_here = v_here.min(rate * SPAN as f64 * ds / du);
                 }
