@@ -13,16 +13,12 @@
 //!   then chosen among the steers reachable from the last one by simulating the ego's bicycle
 //!   model under each, followed by the base law, and keeping the best-tracking one.
 //! * Longitudinal: the minimum of cruise, the speed limit, a curve-speed profile (lateral
-//!   acceleration — lower in tight junction corners — and steer-rate bounds, braked into at a
-//!   comfortable deceleration; no acceleration while the wheel is still turned), stops before
-//!   actors in or predicted into the route corridor (unless the ego clears the spot well before
-//!   they arrive; actors moving roughly along the route near the ego are predicted in the
-//!   route's frame, others on straight lines), stops before red / yellow lights on the route,
-//!   and a time-headway law behind a lead vehicle.
+//!   acceleration and steer-rate bounds, braked into at a comfortable deceleration; no
+//!   acceleration while the wheel is still turned), stops before actors in or predicted into the
+//!   route corridor (unless the ego clears the spot well before they arrive), stops before red /
+//!   yellow lights on the route, and a time-headway law behind a lead vehicle.
 //! * Stall guard: the protocol ends an episode after 5 s below 1 km/h, so when held at rest by a
-//!   light or an actor in its way (a queue crawling up to a red light too) the expert creeps a
-//!   few centimetres every few seconds; the protocol's blocked rule has no exception for red
-//!   lights.
+//!   light or a standing actor the expert creeps a few centimetres every few seconds.
 //! * Optional local planner: with a drivable-area oracle, a static obstacle blocking the route is
 //!   passed by offsetting the pursuit path laterally into free same-direction drivable space.
 //!
@@ -333,8 +329,8 @@ struct StopPoint {
     s_stop: f64,
     v_at: f64,
     reason: SpeedReason,
-    /// How far the front may creep when stalled (lights, and actors in the corridor now, not
-    /// predicted ones): arc of the closest allowed front position.
+    /// How far the front may creep when stalled (lights and standing actors, not moving
+    /// traffic): arc of the closest allowed front position.
     creep_limit: Option<f64>,
 }
 
@@ -695,12 +691,7 @@ impl Expert {
         const SPAN: usize = 4;
         for (i, &k) in ks.iter().enumerate() {
             let d = i as f64 * ds;
-            // Tight turns (a junction's corner, radius under ~12 m) are driven at a lower
-            // lateral acceleration: the steer-rate-limited wheel lags the path there, and a car
-            // that swings wide at the corner overshoots the lane it turns into.
-            let tight = ((k - TIGHT_CURVE_FROM) / (TIGHT_CURVE_FULL - TIGHT_CURVE_FROM)).clamp(0.0, 1.0);
-            let a_lat = p.max_lat_accel_mps2 * (1.0 - (1.0 - TIGHT_CURVE_LAT_FACTOR) * tight);
-            let mut v_here = (a_lat / k.max(1e-6)).sqrt();
+            let mut v_here = (p.max_lat_accel_mps2 / k.max(1e-6)).sqrt();
             // Steer-rate bound: the steer change over the last SPAN metres must be doable in the
             // time it takes to drive them.
             if i >= SPAN {
@@ -750,32 +741,28 @@ impl Expert {
         let mut stops = self.actor_constraints(input, s_ego, v);
         stops.extend(self.light_constraints(input, s_front, v));
         let hold = v * p.decision_period_s;
-        // Stops that hold the ego (practically) at rest.
-        let mut holding: Vec<StopPoint> = Vec::new();
+        let mut binding: Option<StopPoint> = None;
         for st in &stops {
             let d = st.s_stop - s_front - hold;
             let mut allowed = (st.v_at * st.v_at + 2.0 * p.comfort_decel_mps2 * d.max(0.0)).sqrt();
             if st.v_at < 0.5 && allowed < 0.6 {
                 allowed = 0.0;
             }
-            if allowed < p.creep_speed_mps {
-                holding.push(*st);
-            }
             if allowed < target {
                 target = allowed;
                 reason = st.reason;
+                binding = Some(*st);
             }
         }
-        // Stall guard against the protocol's blocked timeout while waiting at rest: only when
-        // everything holding the ego leaves room to creep (a predicted crossing does not).
-        if target < p.creep_speed_mps
-            && self.rest_time_s >= p.stall_guard_s
-            && !holding.is_empty()
-            && holding.iter().all(|b| b.creep_limit.is_some_and(|limit| limit - s_front > 0.3))
-        {
-            // One creep decision moves the ego by a few centimetres: enough to reset the
-            // protocol's at-rest counter.
-            target = p.creep_speed_mps;
+        // Stall guard against the protocol's blocked timeout while waiting at rest.
+        if target < p.creep_speed_mps && self.rest_time_s >= p.stall_guard_s {
+            if let Some(limit) = binding.and_then(|b| b.creep_limit) {
+                // One creep decision moves the ego by a few centimetres: enough to reset the
+                // protocol's at-rest counter.
+                if limit - s_front > 0.3 {
+                    target = p.creep_speed_mps;
+                }
+            }
         }
         (target.max(0.0), reason)
     }
@@ -886,43 +873,10 @@ impl Expert {
             let moving = a.speed_mps.abs() > 0.2;
             let fwd = Vec2::from_angle(a.pose.yaw);
             let last = if moving { steps } else { 0 };
-            // An actor travelling roughly along the route (the next lane, the same lane) is
-            // extrapolated in the route's frame: keeping its lateral offset and its angle to the
-            // route. A straight line would carry a car in the next lane of a bend across the
-            // ego's lane; a cut-in still shows as a lateral drift.
-            // Only near the ego along the route: a route that passes the same place again (a
-            // roundabout's third exit) must not pick up a car on its later part.
-            let along_route = if moving {
-                project_window(route, a.pose.pos, s_lo - 30.0, s_front + 20.0).and_then(|pr| {
-                    let rel = wrap_angle(a.pose.yaw - route_heading(route, pr.s));
-                    // Same direction only: an oncoming car that goes straight on where the route
-                    // turns across its path must keep its straight line.
-                    (pr.distance < ALONG_ROUTE_MAX_LATERAL_M && rel.abs() < ALONG_ROUTE_MAX_ANGLE_RAD)
-                        .then_some((pr.s, pr.lateral, rel))
-                })
-            } else {
-                None
-            };
-            // A car in the ego's lane behind it (a follower) is not the ego's to stop for, even
-            // when its prediction runs into a slow or standing ego.
-            if along_route
-                .is_some_and(|(s_a, lat_a, _)| s_a < s_ego && lat_a.abs() < half_ego + 0.5 * a.width_m)
-            {
-                continue;
-            }
             for k in 0..=last {
                 let t = k as f64 * p.prediction_step_s;
                 let mut fp = a.footprint();
-                match along_route {
-                    Some((s_a, lat_a, rel)) if k > 0 => {
-                        let s_t = s_a + a.speed_mps * rel.cos() * t;
-                        let lat_t = lat_a + a.speed_mps * rel.sin() * t;
-                        let h = route_heading(route, s_t);
-                        fp.pose.pos = route_point(route, s_t) + Vec2::from_angle(h).perp() * lat_t;
-                        fp.pose.yaw = h + rel;
-                    }
-                    _ => fp.pose.pos += fwd * (a.speed_mps * t),
-                }
+                fp.pose.pos += fwd * (a.speed_mps * t);
                 let Some(s_hit) = self.corridor_hit(route, &fp.corners(), s_lo, s_hi, half_ego) else {
                     continue;
                 };
@@ -968,13 +922,12 @@ impl Expert {
                             if p.time_headway_s > 0.0 { free / p.time_headway_s } else { f64::INFINITY };
                         by_brake.min(by_headway.max(v_along.min(free)))
                     };
-                    // Expressed as a stop point reached at speed v_follow right now. Stalled
-                    // behind a crawling lead (a queue at a light), the ego may creep up to it.
+                    // Expressed as a stop point reached at speed v_follow right now.
                     out.push(StopPoint {
                         s_stop: s_front + v * p.decision_period_s,
                         v_at: v_follow,
                         reason: SpeedReason::Lead { actor_id: a.id },
-                        creep_limit: (k == 0).then(|| s_now - a.length_m * 0.5 - p.creep_min_gap_m),
+                        creep_limit: None,
                     });
                 } else {
                     if k == 0 && !moving {
@@ -992,8 +945,7 @@ impl Expert {
                         s_stop: s_hit - gap,
                         v_at: 0.0,
                         reason: SpeedReason::Obstacle { actor_id: a.id },
-                        // Also behind a slowly moving body (a queue crawling up to a light).
-                        creep_limit: (k == 0).then(|| {
+                        creep_limit: (k == 0 && !moving).then(|| {
                             // Keep twice the gap from a person who may step towards the car.
                             let keep = if a.kind == ActorKind::Pedestrian { 2.0 } else { 1.0 };
                             s_hit - (keep * p.creep_min_gap_m).min(p.stop_gap_m)
@@ -1218,17 +1170,6 @@ impl Expert {
         true
     }
 }
-
-/// Moving actors within this distance of the route and this angle to it are predicted in the
-/// route's frame (see `actor_constraints`).
-const ALONG_ROUTE_MAX_LATERAL_M: f64 = 8.0;
-const ALONG_ROUTE_MAX_ANGLE_RAD: f64 = 0.6;
-
-/// Curvature (1/m) from which the curve-speed profile lowers the lateral acceleration, the
-/// curvature at which it reaches `TIGHT_CURVE_LAT_FACTOR` of `max_lat_accel_mps2`.
-const TIGHT_CURVE_FROM: f64 = 0.085;
-const TIGHT_CURVE_FULL: f64 = 0.16;
-const TIGHT_CURVE_LAT_FACTOR: f64 = 0.6;
 
 /// Lanes whose direction differs from the travel heading by more than this are oncoming.
 const SAME_DIRECTION_MAX_RAD: f64 = 1.0;
