@@ -71,6 +71,11 @@ RESULT_FIELDS = (
 )
 
 
+# Hex digits of the trajectory hash kept in the committed results (64 bits are plenty to detect a
+# changed episode and keep the file at ~1 MB).
+TRAJECTORY_HASH_HEX = 16
+
+
 def parse_cell(cell: str) -> tuple[str, float | None]:
     """`"follower@6"` → ("follower", 6.0); `"expert"` → ("expert", None)."""
     name, _, speed = cell.partition("@")
@@ -240,7 +245,9 @@ def write_results(path: Path, rows: list[dict[str, Any]]) -> None:
     w = csv.DictWriter(buf, fieldnames=RESULT_FIELDS, extrasaction="ignore", lineterminator="\n")
     w.writeheader()
     for r in sorted(rows, key=_row_key):
-        w.writerow({**r, "score": repr(float(r["score"])), "sim_s": repr(float(r["sim_s"]))})
+        row = {**r, "score": repr(float(r["score"])), "sim_s": repr(float(r["sim_s"]))}
+        row["trajectory_hash"] = str(r["trajectory_hash"])[:TRAJECTORY_HASH_HEX]
+        w.writerow(row)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(buf.getvalue(), encoding="utf-8")
 
