@@ -11,7 +11,7 @@ from typing import Any
 from drivehierarchy import DriveHierarchyError, _core
 from drivehierarchy._core import ConfigError
 from drivehierarchy.scenarios import builtin_scenarios, resolve_scenario, scenario_id, sumo_home
-from drivehierarchy.suite_probe import POLICIES
+from drivehierarchy.suite_probe import SWEEP
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -51,28 +51,39 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
     pr = cmds.add_parser(
         "probe",
-        help="run the expert, zero, constant-8 m/s and hazard-blind follower policies over scenarios",
+        help="sweep reference drivers (expert, late expert, blind follower / constant / light-obeying "
+        "at several speeds) over scenarios",
         description=(
-            "Measures how discriminating a suite is: S_R4 of four reference policies per scenario "
-            "and per category (state-only episodes in worker processes). Writes OUT/probe.md, "
-            "probe.csv and probe_summary.json; exit 2 when no scenario is found."
+            "Measures how discriminating a suite is: S_R4 of reference drivers per scenario and per "
+            "category over seeds (state-only episodes in worker processes). A cell is expert, "
+            "late_expert, zero, or follower|constant|lights@<m/s>; a bare family name means all its "
+            "sweep speeds. --results merges the episodes into a committed results file (rows of the "
+            "same scenario, cell and seed are replaced); --update-doc regenerates the table between "
+            "<!-- probe:begin --> and <!-- probe:end --> from the results file (or from this run). "
+            "Exit 2 when no scenario is found."
         ),
     )
     pr.add_argument("files", nargs="+", help="scenario files or folders (every */*.toml and *.toml)")
-    pr.add_argument("--out", type=Path, required=True, help="output folder")
+    pr.add_argument("--out", type=Path, help="also write OUT/probe.csv (every episode) and OUT/probe.md")
     pr.add_argument(
-        "--policies", default=",".join(POLICIES), help="comma-separated subset of " + ",".join(POLICIES)
+        "--policies",
+        default="expert,late_expert,zero,follower,constant,lights",
+        help="comma-separated cells (default: the full sweep: " + ",".join(SWEEP) + ")",
     )
-    pr.add_argument("--seed", type=int, default=0)
+    pr.add_argument("--seeds", default="0-4", help="seeds, e.g. 0-4 (default) or 0,3")
     pr.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     pr.add_argument(
         "--traffic", choices=["sumo", "native", "none"], help="override every scenario's traffic mode"
+    )
+    pr.add_argument(
+        "--results", type=Path, help="merge the episodes into this CSV (e.g. docs/suite_probe.csv)"
     )
     pr.add_argument(
         "--update-doc",
         type=Path,
         help="rewrite the part of this Markdown file between <!-- probe:begin --> and <!-- probe:end -->",
     )
+    pr.add_argument("--quiet", action="store_true", help="no per-task progress lines")
     pr.set_defaults(func=_probe)
 
     im = cmds.add_parser(
@@ -140,18 +151,41 @@ def _schema(args: argparse.Namespace) -> int:
 
 
 def _probe(args: argparse.Namespace) -> int:
+    import csv
+    import time
+
     from drivehierarchy import suite_probe
 
-    policies = tuple(p.strip() for p in args.policies.split(",") if p.strip())
-    unknown = [p for p in policies if p not in POLICIES]
-    if unknown or not policies:
-        raise ConfigError(f"--policies {args.policies!r}: expected a subset of {','.join(POLICIES)}")
+    cells = suite_probe.expand_cells(args.policies)
+    seeds = suite_probe.parse_seeds(args.seeds)
     files = _expand(args.files)
-    rows = suite_probe.probe(files, policies, seed=args.seed, jobs=args.jobs, traffic=args.traffic)
-    summary = suite_probe.write_outputs(rows, args.out)
+    t0 = time.perf_counter()
+    rows = suite_probe.probe(
+        files, cells, seeds=seeds, jobs=args.jobs, traffic=args.traffic, progress=not args.quiet
+    )
+    wall = time.perf_counter() - t0
+    cpu = sum(r["wall_s"] for r in rows)
+    print(f"{len(rows)} episodes in {wall:.0f} s wall ({cpu:.0f} s in episodes, {args.jobs} workers)")
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        with (args.out / "probe.csv").open("w", newline="", encoding="utf-8") as fh:
+            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+            w.writeheader()
+            for r in rows:
+                w.writerow({**r, "events": ";".join(r["events"])})
+        (args.out / "probe.md").write_text(
+            suite_probe.markdown(suite_probe.summarize(rows)), encoding="utf-8"
+        )
+    table_rows = rows
+    if args.results is not None:
+        old = suite_probe.read_results(args.results) if args.results.exists() else []
+        table_rows = suite_probe.merge(old, rows)
+        suite_probe.write_results(args.results, table_rows)
+    summary = suite_probe.summarize(table_rows)
+    text = suite_probe.markdown(summary)
     if args.update_doc is not None:
-        suite_probe.update_doc(args.update_doc, suite_probe.markdown(rows, summary))
-    print(suite_probe.markdown(rows, summary).split("\n\n")[0])
+        suite_probe.update_doc(args.update_doc, text)
+    print(text.split("\n\n| scenario |")[0])
     return 0
 
 
