@@ -10,6 +10,7 @@ pub mod sumo_routes;
 pub mod tables;
 pub mod traffic;
 pub mod variation;
+pub mod variation_spec;
 
 pub use json_schema::{scenario_json_schema, scenario_json_schema_string};
 pub use parse::{parse_scenario_file, parse_scenario_str};
@@ -21,8 +22,9 @@ pub use resolve::{
     PACE_GAIN_PER_S, PACE_SETTLED_M, PALETTE, SNAP_DISTANCE_M, SUMO_PREFIX,
 };
 pub use schema::{ScenarioFile, CATEGORIES, SCENARIO_VERSION};
+pub use traffic::seeded_rng;
 pub use traffic::{TrafficDemand, TrafficMode};
-pub use variation::{seeded_rng, Variation, VariationSpec};
+pub use variation_spec::{Variation, VariationSpec};
 
 use crate::Result;
 use serde::Serialize;

@@ -266,7 +266,7 @@ pub struct ResolvedScenario {
     /// Traffic-light overrides (`[[lights]]`), one per overridden light, in file order.
     pub lights: Vec<LightProgram>,
     /// Bounds of the per-seed jitter ([`ResolvedScenario::varied`]).
-    pub variation: crate::scenario::variation::Variation,
+    pub variation: crate::scenario::variation_spec::Variation,
 }
 
 impl ResolvedScenario {
@@ -1484,7 +1484,8 @@ pub fn resolve(file: &Path, spec: &ScenarioFile, opts: &LoadOptions) -> Result<R
         spec.signs.iter().enumerate().map(|(i, s)| resolve_sign(&ctx, i, s)).collect::<Result<Vec<_>>>()?;
     let mut traffic =
         crate::scenario::traffic::resolve_traffic(file, &map, spec.traffic.as_ref(), &ego.route)?;
-    let (variation, jitter) = crate::scenario::variation::resolve_variation(file, spec.variation.as_ref())?;
+    let (variation, jitter) =
+        crate::scenario::variation_spec::resolve_variation(file, spec.variation.as_ref())?;
     traffic.jitter = jitter;
     Ok(ResolvedScenario {
         file: file.to_path_buf(),

@@ -48,7 +48,7 @@ pub struct ScenarioFile {
     pub lights: Vec<LightOverrideSpec>,
     /// Bounds of the per-seed jitter (`[variation]`; defaults apply when absent).
     #[serde(default)]
-    pub variation: Option<crate::scenario::variation::VariationSpec>,
+    pub variation: Option<crate::scenario::variation_spec::VariationSpec>,
 }
 
 /// A point (and optionally a heading) either on a lane (`lane` + `s` + `offset_m`) or in

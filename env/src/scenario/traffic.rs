@@ -266,7 +266,7 @@ pub struct TrafficDemand {
     pub flows: Vec<DemandFlow>,
     pub random: Option<DemandRandom>,
     /// Per-seed jitter of departures and speed factors (`[variation]`).
-    pub jitter: crate::scenario::variation::TrafficJitter,
+    pub jitter: crate::scenario::variation_spec::TrafficJitter,
 }
 
 /// A scenario actor that SUMO sees as a vehicle placed every tick (`dh_actor_<id>`).
@@ -277,6 +277,12 @@ pub struct MirrorSpec {
     pub length_m: f64,
     pub width_m: f64,
     pub height_m: f64,
+}
+
+/// The seeded generator of stream `stream` of episode seed `seed` (the one place RNGs are
+/// built: random trips use stream 0, the native traffic model `0x1D_0000`).
+pub fn seeded_rng(seed: u64, stream: u64) -> SplitMix {
+    SplitMix::new(seed ^ stream)
 }
 
 /// splitmix64: the demand's seeded generator (tiny, portable, identical on every platform).
@@ -852,7 +858,7 @@ impl TrafficDemand {
     ) -> Vec<DemandVehicle> {
         let Some(r) = &self.random else { return Vec::new() };
         let n = (r.density_per_km * self.lane_km(map, r)).round() as usize;
-        let mut rng = crate::scenario::variation::seeded_rng(seed, 0);
+        let mut rng = seeded_rng(seed, 0);
         // Departure edges weighted by their length.
         let weights: Vec<f64> =
             r.edges.iter().map(|&e| edge_length(map, e) * map.edges[e].lanes.len() as f64).collect();

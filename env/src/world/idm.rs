@@ -526,7 +526,7 @@ impl TrafficModel for IdmTraffic {
         self.vehicles.clear();
         self.next_key = 0;
         self.demand = self.canonical.varied(input.variation_seed);
-        self.rng = crate::scenario::variation::seeded_rng(seed, 0x1D_0000);
+        self.rng = crate::scenario::traffic::seeded_rng(seed, 0x1D_0000);
         self.time_s = -self.demand.warmup_s - DT_S;
         let mut pending = self.demand.vehicles.clone();
         pending.extend(self.demand.random_trips(&self.map, seed, self.ego_start, 20.0));
