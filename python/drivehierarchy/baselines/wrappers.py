@@ -307,7 +307,9 @@ class SuiteEnv(gym.Env[dict[str, Any], np.ndarray]):
         if previous is not self.current:
             # One libsumo simulation per process: the scenario left behind gives SUMO back.
             previous.release_traffic()
-        sub_seed = int(self.np_random.integers(0, 2**31 - 1))
+        # An explicit seed reaches the scenario as given (reset(seed=0) is the canonical scenario,
+        # as in `r4 evaluate`); unseeded resets draw one, so training sees the seeded variations.
+        sub_seed = seed if seed is not None else int(self.np_random.integers(0, 2**31 - 1))
         obs, info = self.current.reset(seed=sub_seed, options=options)
         info = dict(info)
         info["scenario"] = str(path)

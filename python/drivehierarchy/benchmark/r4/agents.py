@@ -44,7 +44,7 @@ class AgentRegistry:
             ) from None
 
     def names(self) -> list[str]:
-        return sorted(self._factories) + [f"{p}:PATH" for p in sorted(self._prefixes)]
+        return sorted(self._factories) + [f"{p}:..." for p in sorted(self._prefixes)]
 
 
 AGENTS = AgentRegistry()
