@@ -58,12 +58,17 @@ def worker_pool() -> Iterator[ProcessPoolExecutor]:
 
 @pytest.fixture(scope="session")
 def reference_rows() -> list[dict[str, Any]]:
-    """The four reference policies of `drivehierarchy scenario probe` (expert, zero, constant,
-    follower) over every built-in scenario, seed 0, state-only: driven once per test session and
-    shared by every test that needs them."""
+    """Four reference drivers of `drivehierarchy scenario probe` (the expert, zero, constant 8 m/s
+    and the blind follower at 10 m/s) over every built-in scenario, seed 0, state-only: driven
+    once per test session and shared by every test that needs them."""
     from drivehierarchy import suite_probe
     from drivehierarchy.scenarios import builtin_scenarios, sumo_home
 
     if sumo_home() is None:
         pytest.skip("eclipse-sumo is not installed")
-    return suite_probe.probe(builtin_scenarios(), seed=0, jobs=WORKERS, progress=False)
+    rows = suite_probe.probe(
+        builtin_scenarios(), cells=("expert", "zero", "constant@8", "follower@10"), seeds=(0,),
+        jobs=WORKERS, progress=False,
+    )  # fmt: skip
+    # `policy` names the reference driver as tests read it (the probe's cell, without its speed).
+    return [{**r, "policy": r["cell"].split("@")[0]} for r in rows]
