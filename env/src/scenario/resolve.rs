@@ -497,6 +497,21 @@ struct Ctx<'a> {
 }
 
 impl Ctx<'_> {
+    /// Alternative keys of one table (`(key, given)`): exactly one must be given; the error
+    /// shows the ones that were (`{}` for none) and names them all.
+    fn exactly_one(&self, field: &str, keys: &[(&str, bool)]) -> Result<()> {
+        let given: Vec<&str> = keys.iter().filter(|k| k.1).map(|k| k.0).collect();
+        if given.len() == 1 {
+            return Ok(());
+        }
+        let names: Vec<String> = keys.iter().map(|k| format!("`{}`", k.0)).collect();
+        let (last, rest) = names.split_last().expect("alternatives are listed");
+        Err(self.err(
+            field,
+            if given.is_empty() { "{}".to_string() } else { given.join(" + ") },
+            format!("give exactly one of {} or {last}", rest.join(", ")),
+        ))
+    }
     fn err(&self, field: impl Into<String>, value: impl std::fmt::Display, msg: impl Into<String>) -> Error {
         Error::scenario(self.file, field, value, msg)
     }
@@ -885,23 +900,15 @@ fn resolve_trigger(
     self_pos: Vec2,
 ) -> Result<Trigger> {
     let Some(t) = t else { return Ok(Trigger::Time(0.0)) };
-    let given: Vec<&str> = [
-        ("time_s", t.time_s.is_some()),
-        ("ego_within_m", t.ego_within_m.is_some()),
-        ("ego_eta_s", t.ego_eta_s.is_some()),
-        ("after", t.after.is_some()),
-    ]
-    .iter()
-    .filter(|g| g.1)
-    .map(|g| g.0)
-    .collect();
-    if given.len() != 1 {
-        return Err(ctx.err(
-            field,
-            if given.is_empty() { "{}".to_string() } else { given.join(" + ") },
-            "give exactly one of `time_s`, `ego_within_m`, `ego_eta_s` or `after`",
-        ));
-    }
+    ctx.exactly_one(
+        field,
+        &[
+            ("time_s", t.time_s.is_some()),
+            ("ego_within_m", t.ego_within_m.is_some()),
+            ("ego_eta_s", t.ego_eta_s.is_some()),
+            ("after", t.after.is_some()),
+        ],
+    )?;
     let of_ok = t.ego_within_m.is_some() || t.ego_eta_s.is_some();
     if let (Some(of), false) = (&t.of, of_ok) {
         return Err(ctx.err(
@@ -991,28 +998,20 @@ fn resolve_brake(
     b: &BrakeSpec,
     has_pace: bool,
 ) -> Result<BrakeEvent> {
-    let given: Vec<&str> = [
-        ("at_s", b.at_s.is_some()),
-        ("after_s", b.after_s.is_some()),
-        ("ego_within_m", b.ego_within_m.is_some()),
-        ("ego_gap_m", b.ego_gap_m.is_some()),
-        ("ego_gap_s", b.ego_gap_s.is_some()),
-        ("ego_ttc_s", b.ego_ttc_s.is_some()),
-        ("ego_eta_s", b.ego_eta_s.is_some()),
-        ("gap_held_s", b.gap_held_s.is_some()),
-        ("after", b.after.is_some()),
-    ]
-    .iter()
-    .filter(|g| g.1)
-    .map(|g| g.0)
-    .collect();
-    if given.len() != 1 {
-        return Err(ctx.err(
-            bf,
-            if given.is_empty() { "{}".to_string() } else { given.join(" + ") },
-            "give exactly one of `at_s`, `after_s`, `ego_within_m`, `ego_gap_m`, `ego_gap_s`, `ego_ttc_s`, `ego_eta_s`, `gap_held_s` or `after`",
-        ));
-    }
+    ctx.exactly_one(
+        bf,
+        &[
+            ("at_s", b.at_s.is_some()),
+            ("after_s", b.after_s.is_some()),
+            ("ego_within_m", b.ego_within_m.is_some()),
+            ("ego_gap_m", b.ego_gap_m.is_some()),
+            ("ego_gap_s", b.ego_gap_s.is_some()),
+            ("ego_ttc_s", b.ego_ttc_s.is_some()),
+            ("ego_eta_s", b.ego_eta_s.is_some()),
+            ("gap_held_s", b.gap_held_s.is_some()),
+            ("after", b.after.is_some()),
+        ],
+    )?;
     if let (Some(of), false) = (&b.of, b.ego_within_m.is_some() || b.ego_eta_s.is_some()) {
         return Err(ctx.err(
             format!("{bf}.of"),
