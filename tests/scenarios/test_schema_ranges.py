@@ -23,7 +23,12 @@ SUITE = REPO / "scenarios" / "r4"
 # `key = number` outside comments, inline tables included.
 NUMBER = re.compile(r"(?<![\w.\"])([a-z][a-z0-9_]*)\s*=\s*(-?\d[\d_.eE+-]*)")
 MAP_LINE = re.compile(r'^map\s*=\s*"([^"]+)"', re.M)
-RANGE_MESSAGES = ("must be a finite number ≥ 0", "must be a finite number > 0", "must lie in (0", "must lie in [0")
+RANGE_MESSAGES = (
+    "must be a finite number ≥ 0",
+    "must be a finite number > 0",
+    "must lie in (0",
+    "must lie in [0",
+)
 
 
 def _occurrences() -> dict[str, tuple[Path, int, int, int]]:
@@ -88,4 +93,5 @@ def test_schema_range_matches_the_validator(
     if refusal is not None and f"{key}` = {value}:" in refusal and any(m in refusal for m in RANGE_MESSAGES):
         assert schema_errors, f"{where}: the validator refuses it ({refusal}) but the schema accepts it"
     if schema_errors:
-        assert refusal is not None, f"{where}: the schema refuses it ({schema_errors[0].message}) but the validator accepts it"
+        msg = schema_errors[0].message
+        assert refusal is not None, f"{where}: the schema refuses it ({msg}) but the validator accepts it"
