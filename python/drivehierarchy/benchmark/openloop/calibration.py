@@ -1,7 +1,8 @@
 """Weight calibration from a pool of models' task scores (`drivehierarchy openloop calibrate`).
 
 SCORES.csv has a `model` column and one column per task id (`R1_1_A … R3_2`, any subset that
-covers every rank with a budget) holding task scores in 0–100. The weights follow PROTOCOL
+covers every rank with a budget) holding task scores in 0–100; the report's `table1.csv` is one
+(its `avg_score` and rank columns are skipped). The weights follow PROTOCOL
 §1.4: Spearman ρ between tasks across models, L_i = 1 + λ_same Σ_same max(ρ,0)^γ + λ_cross
 Σ_other max(ρ,0)^γ, u_i = 1/L_i normalised within the rank, times the rank budget. The
 arithmetic is in Rust (`dh-benchmark`).
@@ -20,6 +21,9 @@ from drivehierarchy import ConfigError, _core
 
 DEFAULT_BUDGETS: dict[str, float] = {"R1": 0.3, "R2": 0.3, "R3": 0.4}
 TASK_IDS: tuple[str, ...] = tuple(t["id"] for t in _core.openloop_tasks())
+# Columns `openloop report`'s table1.csv writes beside the tasks: its output feeds calibration.
+NOT_SCORED = ("", "–", "-")
+REPORT_COLUMNS: frozenset[str] = frozenset({"avg_score", *(t["rank"] for t in _core.openloop_tasks())})
 
 
 class ScoresTable(NamedTuple):
@@ -46,13 +50,19 @@ def read_scores_csv(path: str | Path) -> ScoresTable:
         raise ConfigError(f"{p}: header has no `model` column: {header}")
     task_cols: list[tuple[int, str]] = []
     for i, name in enumerate(header):
-        if name == "model":
+        if name == "model" or name in REPORT_COLUMNS:
             continue
         if name not in TASK_IDS:
             raise ConfigError(f"{p}: column {i + 1} `{name}` is not a task id (expected one of {TASK_IDS})")
         if name in [t for _, t in task_cols]:
             raise ConfigError(f"{p}: column `{name}` appears twice")
         task_cols.append((i, name))
+    # A task nobody scored (R1_4 without the judge: `–` in table1.csv) is left out, not a 0.
+    task_cols = [
+        (i, name)
+        for i, name in task_cols
+        if not all(len(row) > i and row[i].strip() in NOT_SCORED for row in rows[1:])
+    ]
     if not task_cols:
         raise ConfigError(f"{p}: no task columns")
     mcol = header.index("model")
