@@ -19,7 +19,9 @@ from typing import Any, NamedTuple
 
 from drivehierarchy import ConfigError, _core
 
-DEFAULT_BUDGETS: dict[str, float] = {"R1": 0.3, "R2": 0.3, "R3": 0.4}
+# PROTOCOL §1.4's λ_same, λ_cross, γ and rank budgets, as the Rust calibration defines them.
+DEFAULTS: dict[str, Any] = dict(_core.openloop_calibration_defaults())
+DEFAULT_BUDGETS: dict[str, float] = dict(DEFAULTS["budgets"])
 TASK_IDS: tuple[str, ...] = tuple(t["id"] for t in _core.openloop_tasks())
 # Columns `openloop report`'s table1.csv writes beside the tasks: its output feeds calibration.
 NOT_SCORED = ("", "–", "-")
@@ -96,12 +98,13 @@ def read_scores_csv(path: str | Path) -> ScoresTable:
 def calibrate_details(
     table: ScoresTable | tuple[Sequence[str], Sequence[str], Sequence[Sequence[float]]],
     *,
-    lambda_same: float = 1.0,
-    lambda_cross: float = 0.35,
-    gamma: float = 2.0,
+    lambda_same: float | None = None,
+    lambda_cross: float | None = None,
+    gamma: float | None = None,
     budgets: Mapping[str, float] | None = None,
 ) -> dict[str, Any]:
-    """Weights plus the intermediate ρ matrix, loads L_i and uniqueness u_i."""
+    """Weights plus the intermediate ρ matrix, loads L_i and uniqueness u_i (a parameter left
+    as None takes its default, `DEFAULTS`)."""
     _models, tasks, matrix = table
     return dict(
         _core.openloop_calibrate(
@@ -110,7 +113,7 @@ def calibrate_details(
             lambda_same,
             lambda_cross,
             gamma,
-            dict(budgets) if budgets is not None else dict(DEFAULT_BUDGETS),
+            dict(budgets) if budgets is not None else None,
         )
     )
 
@@ -118,9 +121,9 @@ def calibrate_details(
 def calibrate(
     table: ScoresTable | tuple[Sequence[str], Sequence[str], Sequence[Sequence[float]]],
     *,
-    lambda_same: float = 1.0,
-    lambda_cross: float = 0.35,
-    gamma: float = 2.0,
+    lambda_same: float | None = None,
+    lambda_cross: float | None = None,
+    gamma: float | None = None,
     budgets: Mapping[str, float] | None = None,
 ) -> dict[str, float]:
     """Task id → weight (in the table's task order) from `(models, tasks, matrix)`."""
