@@ -36,6 +36,8 @@ ROLLOUTS_PER_RECORD = 0.5
 MOMENTS_PER_ROLLOUT = 5.5
 # Enough scenes for small sets (tests) to have an answer for every task.
 MIN_ROLLOUTS = 10
+# Anchors with costly frames beyond `oversample × per_task` (small sets vary the most).
+SPARE_ANCHORS = 10
 
 
 @dataclass(frozen=True)
@@ -99,7 +101,7 @@ def need_shares(needs: tuple[Needs, ...], per_task: int, n_rollouts: int) -> tup
     return tuple(
         1.0
         if (nd.cameras, nd.clip, nd.history) == ((FRONT,), 0, 0)
-        else min(1.0, nd.oversample * per_task / moments)
+        else min(1.0, (nd.oversample * per_task + SPARE_ANCHORS) / moments)
         for nd in needs
     )
 
