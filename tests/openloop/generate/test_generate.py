@@ -229,3 +229,21 @@ def test_predict_and_score_through_the_loopback_server(generated, tmp_path: Path
     assert set(scores) == set(summary["tasks"]) - {"R1_4"}
     for task, score in scores.items():
         assert score == pytest.approx(100.0), task
+
+
+def test_train_split_plays_shifted_starts_reproducibly(tmp_path: Path) -> None:
+    runs = []
+    for name in ("a", "b"):
+        out = tmp_path / name
+        summary = generate(SUITE, out, per_task=2, seed=5, split="train", tasks=["R1_1_A", "R1_2_A"], jobs=2)
+        runs.append((out, summary))
+    (a, sa), (b, _) = runs
+    assert all(e["seed"] not in EVAL_SEEDS and e["start_back_m"] > 0 for e in sa["episodes"])
+    for rel in sorted(p.relative_to(a) for p in a.rglob("*") if p.is_file()):
+        assert (a / rel).read_bytes() == (b / rel).read_bytes(), rel
+    # The shifted start is in the scenario the rollout played: the ego starts farther back.
+    first = Path(SUITE / sa["episodes"][0]["scenario"])
+    from drivehierarchy.benchmark.openloop.generate.writer import shifted_scenario
+
+    text = shifted_scenario(first, 5.0)
+    assert text != first.read_text(encoding="utf-8") and "[ego]" in text

@@ -14,7 +14,9 @@ import hashlib
 import json
 import multiprocessing as mp
 import random
+import re
 import sys
+import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -40,11 +42,37 @@ MIN_ROLLOUTS = 10
 SPARE_ANCHORS = 10
 
 
+# Train episodes start the ego this much farther back on its start lane (seeded, metres), so
+# even scenarios without live traffic (where the seed changes nothing) play other states.
+TRAIN_START_BACK_M = (3.0, 15.0)
+_EGO_START = re.compile(r"^(start\s*=\s*\{\s*lane\s*=\s*\"[^\"]*\"\s*,\s*s\s*=\s*)([0-9.]+)", re.M)
+_MAP = re.compile(r'^(map\s*=\s*)"([^"]*)"', re.M)
+
+
 @dataclass(frozen=True)
 class Episode:
     scenario: str
     driver: str
     seed: int
+    start_back_m: float = 0.0
+
+
+def shifted_scenario(path: Path, back_m: float) -> str:
+    """The scenario's TOML with the ego starting `back_m` farther back on its start lane (at
+    least 1 m into it) and a relative map path made absolute (the text is loaded elsewhere;
+    `sumo:` and built-in map names stay)."""
+    text = path.read_text(encoding="utf-8")
+    ego = text.find("[ego]")
+    m = _EGO_START.search(text, ego) if ego >= 0 else None
+    if m is None:
+        raise ConfigError(f"{path}: field [ego].start: expected `start = {{ lane = ..., s = ... }}` to shift")
+    s_new = max(1.0, float(m.group(2)) - back_m)
+    text = text[: m.start(2)] + f"{s_new:.2f}" + text[m.end(2) :]
+    mm = _MAP.search(text)
+    if mm and ":" not in mm.group(2) and ("/" in mm.group(2) or mm.group(2).startswith(".")):
+        full = (path.parent / mm.group(2)).resolve().as_posix()
+        text = text[: mm.start(2)] + full + text[mm.end(2) :]
+    return text
 
 
 def suite_files(suite: Path) -> list[Path]:
@@ -84,15 +112,22 @@ def plan_episodes(
         lap = i // len(order)
         driver = drivers[(i + lap + seed) % len(drivers)]
         if split == "eval":
-            ep_seed = EVAL_SEEDS[(i + lap) % len(EVAL_SEEDS)]
+            eps.append(Episode(str(f), driver, EVAL_SEEDS[(i + lap) % len(EVAL_SEEDS)]))
         else:
-            ep_seed = TRAIN_SEED_BASE + rng.randrange(1_000_000)
-        eps.append(Episode(str(f), driver, ep_seed))
+            back = round(rng.uniform(*TRAIN_START_BACK_M), 2)
+            eps.append(Episode(str(f), driver, TRAIN_SEED_BASE + rng.randrange(1_000_000), back))
     return eps
 
 
 def _run(ep: Episode, needs: tuple[Needs, ...], shares: tuple[float, ...], split: str) -> Rollout:
-    return rollout(ep.scenario, ep.driver, ep.seed, needs, shares=shares, split=split)
+    if not ep.start_back_m:
+        return rollout(ep.scenario, ep.driver, ep.seed, needs, shares=shares, split=split)
+    with tempfile.TemporaryDirectory() as tmp:
+        derived = Path(tmp) / Path(ep.scenario).name
+        derived.write_text(shifted_scenario(Path(ep.scenario), ep.start_back_m), encoding="utf-8")
+        ro = rollout(derived, ep.driver, ep.seed, needs, shares=shares, split=split)
+    ro.scenario = ep.scenario
+    return ro
 
 
 def need_shares(needs: tuple[Needs, ...], per_task: int, n_rollouts: int) -> tuple[float, ...]:
@@ -192,6 +227,7 @@ def generate(
                 else Path(e.scenario).name,
                 "driver": e.driver,
                 "seed": e.seed,
+                "start_back_m": e.start_back_m,
                 "moments": len(r.moments()),
                 "termination": r.termination,
             }
