@@ -115,7 +115,13 @@ class Editor:
         return str((self.abs_path(rel).parent / spec).resolve())
 
     def geometry(self, rel: str, text: str) -> dict[str, Any]:
-        """`{ok: True, geometry}` or `{ok: False, error}` (the validator's message, split)."""
+        """`{ok, geometry | error, doc}`: the world's resolution of the text, or the validator's
+        message split into file, line, column, field, value and reason; `doc` is the TOML as
+        data (what the page's forms show)."""
+        doc = files.doc_json(text)
+        return {"doc": doc, **self._resolve(rel, text)}
+
+    def _resolve(self, rel: str, text: str) -> dict[str, Any]:
         try:
             geo = json.loads(_core.scenario_geometry(str(self.abs_path(rel)), text, sumo_home()))
         except DriveHierarchyError as exc:

@@ -12,7 +12,7 @@ from pathlib import Path, PurePosixPath
 from typing import Any
 
 import tomlkit
-from tomlkit.items import AoT, Array, Table
+from tomlkit.items import AoT, Array, InlineTable, Table
 
 MAX_FILE_BYTES = 1_000_000
 
@@ -68,19 +68,46 @@ def _container(doc: Any, key: str | int) -> Any:
         raise ValueError(f"no `{key}` here") from exc
 
 
+def _as_toml(value: Any) -> str:
+    item = _item(value)
+    return item.as_string() if hasattr(item, "as_string") else tomlkit.item(item).as_string()
+
+
 def _item(value: Any) -> Any:
     """A JSON value as a tomlkit item; objects become inline tables (`{ lane = ..., s = ... }`)."""
     if isinstance(value, dict):
-        t = tomlkit.inline_table()
-        for k, v in value.items():
-            t[k] = _item(v)
-        return t
+        # Written as the suite writes them: `{ lane = "C2T_1", s = 140.0 }`.
+        body = ", ".join(f"{tomlkit.key(k).as_string()} = {_as_toml(v)}" for k, v in value.items())
+        return tomlkit.parse(f"v = {{ {body} }}" if body else "v = {}")["v"]
     if isinstance(value, list):
         a = tomlkit.array()
         for v in value:
             a.append(_item(v))
         return a
     return value
+
+
+def _table(value: dict[str, Any]) -> Table:
+    t = tomlkit.table()
+    for k, v in value.items():
+        if isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
+            aot = tomlkit.aot()
+            for x in v:
+                aot.append(_table(x))
+            t[k] = aot
+        elif isinstance(v, dict) and any(isinstance(x, (dict, list)) for x in v.values()):
+            t[k] = _table(v)
+        else:
+            t[k] = _item(v)
+    return t
+
+
+def doc_json(text: str) -> dict[str, Any] | None:
+    """The TOML text as plain JSON-able data (None when it is no TOML)."""
+    try:
+        return tomlkit.parse(text).unwrap()
+    except tomlkit.exceptions.TOMLKitError:
+        return None
 
 
 def path_str(path: list[str | int]) -> str:
@@ -130,8 +157,19 @@ def apply_edits(text: str, edits: list[dict[str, Any]]) -> str:
             except (KeyError, IndexError) as exc:
                 raise ValueError(f"edit of `{where}`: nothing to delete") from exc
         elif "value" in e:
+            value = e["value"]
+            current = parent.get(last) if isinstance(parent, dict) else None
+            if isinstance(current, InlineTable) and isinstance(value, dict) and set(current) == set(value):
+                # Same keys in place: the table keeps its layout, only changed values differ.
+                for k, v in value.items():
+                    if current.get(k) != v:
+                        current[k] = _item(v)
+                continue
             try:
-                parent[last] = _item(e["value"])
+                # A `[table]` stays a table (with `[[sub]]` arrays), not an inline one.
+                parent[last] = (
+                    _table(value) if isinstance(current, Table) and isinstance(value, dict) else _item(value)
+                )
             except (IndexError, TypeError) as exc:
                 raise ValueError(f"edit of `{where}`: {exc}") from exc
         else:
