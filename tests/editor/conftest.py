@@ -29,6 +29,6 @@ def client(workspace: Path):
 
     from drivehierarchy.editor import create_app
 
-    app = create_app(workspace / "r4", "builtin:town01", max_body_bytes=200_000)
+    app = create_app(workspace / "r4", "builtin:town01", max_body_bytes=200_000, precompute=False)
     with TestClient(app, base_url=BASE) as c:
         yield c

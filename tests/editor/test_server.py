@@ -184,7 +184,7 @@ def test_unchanged_save_is_byte_identical_for_the_whole_suite(tmp_path: Path) ->
     paths = sorted((root / "r4").glob("*/*.toml"))
     assert len(paths) == 100
     originals = {p: p.read_bytes() for p in paths}
-    with TestClient(create_app(root / "r4"), base_url=BASE) as client:
+    with TestClient(create_app(root / "r4", precompute=False), base_url=BASE) as client:
         for p in paths:
             rel = p.relative_to(root / "r4").as_posix()
             d = client.get("/api/file", params={"path": rel}).json()
@@ -234,3 +234,32 @@ def test_page_and_assets_are_served(client) -> None:
     assert "http" not in r.text.replace(BASE, "").split("<body")[0].lower().replace("http-equiv", "")
     assert client.get("/static/editor.js").status_code == 200
     assert json.loads(client.get("/api/info").text)["categories"][0] == "01_pedestrian"
+
+
+def test_precomputed_frames_equal_rendered_ones(workspace: Path) -> None:
+    """The background worker drives the previewed buffer to its end and renders every decision's
+    frames; a cached frame is the bytes an on-demand render gives."""
+    import threading
+
+    from drivehierarchy.editor.app import Editor
+    from drivehierarchy.editor.scene import ScenePlayer
+
+    ed = Editor(workspace / "r4")
+    path = str(workspace / "r4" / PED)
+    text = Path(path).read_text(encoding="utf-8")
+    player = ed.players.get(path, text)
+    stop = threading.Event()
+    steps = 0
+    while player.precompute_step():
+        steps += 1
+    assert player.done and len(player.frames) == 2 * len(player.states)
+    stop.set()
+    fresh = ScenePlayer(path, text)
+    try:
+        for t in (0.0, 7.3, 19.0):
+            for view in ("front", "bev"):
+                cached, time_s = player.png_at(t, view)
+                assert (cached, time_s) == fresh.png_at(t, view)
+    finally:
+        fresh.close()
+        ed.players.close()

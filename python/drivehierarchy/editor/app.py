@@ -32,7 +32,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from drivehierarchy import DriveHierarchyError, _core
 from drivehierarchy.editor import files
-from drivehierarchy.editor.scene import PROBE_CELLS, PlayerCache, png_bytes
+from drivehierarchy.editor.scene import PROBE_CELLS, PlayerCache
 from drivehierarchy.scenarios import builtin_root, builtin_scenarios, sumo_home
 
 STATIC = Path(__file__).resolve().parent / "static"
@@ -103,6 +103,18 @@ class Editor:
         self.players = PlayerCache()
         # One world at a time: players are not thread-safe and the machine is small.
         self.lock = threading.Lock()
+
+    def precompute(self, stop: threading.Event) -> None:
+        """Works ahead for the most recent player, one short unit under the lock at a time so
+        requests get the lock in between."""
+        while not stop.is_set():
+            with self.lock:
+                player = self.players.most_recent()
+                try:
+                    busy = player is not None and player.precompute_step()
+                except Exception:  # a buffer the world cannot play: the request path reports it
+                    busy = False
+            stop.wait(0.005 if busy else 0.2)
 
     # -- helpers ---------------------------------------------------------------------------
     def abs_path(self, rel: str) -> Path:
@@ -188,8 +200,14 @@ def blank_text(new_id: str, category: str, map_spec: str) -> str:
 
 
 def create_app(
-    root: Path, default_map: str | None = None, *, max_body_bytes: int = MAX_BODY_BYTES
+    root: Path,
+    default_map: str | None = None,
+    *,
+    max_body_bytes: int = MAX_BODY_BYTES,
+    precompute: bool = True,
 ) -> Starlette:
+    """The editor on `root`. `precompute`: a background thread drives the most recently
+    previewed buffer to its end and renders its frames ahead of the slider."""
     ed = Editor(root, default_map)
 
     def api(fn: Any) -> Any:
@@ -316,11 +334,8 @@ def create_app(
         d = _json(body)
         t = float(_field(d, "time_s", (int, float)))
         view = d.get("view", "front")
-        player = _player(d)
-        png = png_bytes(player.frame_at(t, view))
-        return Response(
-            png, media_type="image/png", headers={"X-Scene-Time": f"{player.state_at(t)['time_s']:.2f}"}
-        )
+        png, time_s = _player(d).png_at(t, view)
+        return Response(png, media_type="image/png", headers={"X-Scene-Time": f"{time_s:.2f}"})
 
     def run(request: Request, body: bytes) -> Response:
         return JSONResponse(_player(_json(body)).run_to_end())
@@ -366,7 +381,14 @@ def create_app(
 
     @contextlib.asynccontextmanager
     async def lifespan(app: Starlette) -> AsyncIterator[None]:
+        stop = threading.Event()
+        worker = threading.Thread(target=ed.precompute, args=(stop,), daemon=True) if precompute else None
+        if worker is not None:
+            worker.start()
         yield
+        stop.set()
+        if worker is not None:
+            worker.join(timeout=30)
         ed.players.close()
 
     app = Starlette(routes=routes, middleware=middleware, lifespan=lifespan)
