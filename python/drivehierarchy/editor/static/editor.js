@@ -686,7 +686,7 @@ function renderSummary() {
   el.replaceChildren(h("div", {}, h("strong", {}, s.id), ` (${s.category})`),
     h("div", { id: "route-info" }, `route ${s.route_length_m.toFixed(1)} m over ${s.route_edges.length} edges, T_ref ${s.reference_duration_s.toFixed(1)} s`),
     h("div", {}, `scenario duration ${S.geo.scenario_duration_s.toFixed(1)} s; ${s.actors} actors, ${s.obstacles} obstacles; traffic: ${s.traffic}`),
-    S.error ? h("div", { class: "help" }, "(drawn: the last valid state)") : null);
+    ...(S.error ? [h("div", { class: "help" }, "(drawn: the last valid state)")] : []));
 }
 
 function fieldPath(field) {
