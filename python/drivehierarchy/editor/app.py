@@ -2,7 +2,7 @@
 
 A local server that writes files, so every request is checked before it reaches a route:
 
-* Host must be the server's own (127.0.0.1 / localhost): a DNS-rebinding page gets 403;
+* Host must be the server's own name (127.0.0.1 / localhost): a DNS-rebinding page gets 403;
 * a request carrying a foreign Origin gets 403, and a state-changing request (POST) must carry
   the page's own Origin (browsers always send it on POST), so a cross-site form or fetch cannot
   save files;
@@ -55,6 +55,11 @@ class OriginAndSizeGuard:
         headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope["headers"]}
         host = headers.get("host", "")
         origin = headers.get("origin")
+        name = host.rsplit(":", 1)[0] if not host.startswith("[") else host
+        if name not in ALLOWED_HOSTS:
+            # DNS rebinding: a page of another name resolved to 127.0.0.1.
+            await PlainTextResponse(f"refused: foreign Host {host!r}", 403)(scope, receive, send)
+            return
         own = {f"http://{host}"}
         if origin is not None and origin not in own:
             await PlainTextResponse(f"refused: foreign Origin {origin!r}", 403)(scope, receive, send)
@@ -374,9 +379,11 @@ def create_app(
         Route("/api/probe", api(probe), methods=["POST"]),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
     ]
+    # The guard answers a foreign Host with 403; Starlette's TrustedHostMiddleware stays behind
+    # it as a second check of the same rule.
     middleware = [
-        Middleware(TrustedHostMiddleware, allowed_hosts=list(ALLOWED_HOSTS)),
         Middleware(OriginAndSizeGuard, max_body_bytes=max_body_bytes),
+        Middleware(TrustedHostMiddleware, allowed_hosts=list(ALLOWED_HOSTS)),
     ]
 
     @contextlib.asynccontextmanager
