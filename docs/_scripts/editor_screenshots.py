@@ -46,7 +46,8 @@ def main() -> int:
                 """() => { const S = window.editor.S; S.view.scale = 4.5;
                 S.view.ox = 20; S.view.oy = 60; }"""
             )
-            page.eval_on_selector("#time", "(el) => { el.value = '14'; el.dispatchEvent(new Event('input')); }")
+            set_time = "(el) => { el.value = '14'; el.dispatchEvent(new Event('input')); }"
+            page.eval_on_selector("#time", set_time)
             page.wait_for_function("Number(document.getElementById('front').dataset.time) > 13.7")
             page.wait_for_function(idle)
             page.click("#btn-run")
