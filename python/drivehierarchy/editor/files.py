@@ -144,6 +144,7 @@ def apply_edits(text: str, edits: list[dict[str, Any]]) -> str:
             target = _container(parent, last)
             if isinstance(target, AoT):
                 table = tomlkit.table()
+                table.trivia.indent = "\n"  # a blank line before the new `[[...]]`, as the suite has
                 for k, v in value.items():
                     table[k] = _item(v)
                 target.append(table)
@@ -174,7 +175,9 @@ def apply_edits(text: str, edits: list[dict[str, Any]]) -> str:
                 raise ValueError(f"edit of `{where}`: {exc}") from exc
         else:
             raise ValueError(f"edit of `{where}`: give `value`, `delete` or `append`")
-    return tomlkit.dumps(doc)
+    out = tomlkit.dumps(doc)
+    # A table appended at the end still ends the file with a newline.
+    return out + "\n" if text.endswith("\n") and not out.endswith("\n") else out
 
 
 ERROR_RE = re.compile(
