@@ -32,7 +32,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from drivehierarchy import DriveHierarchyError, _core
 from drivehierarchy.editor import files
-from drivehierarchy.editor.scene import PROBE_CELLS, PlayerCache
+from drivehierarchy.editor.scene import PROBE_CELLS, PlayerCache, ScenePlayer
 from drivehierarchy.scenarios import builtin_root, builtin_scenarios, sumo_home
 
 STATIC = Path(__file__).resolve().parent / "static"
@@ -105,20 +105,18 @@ class Editor:
     def __init__(self, root: Path, default_map: str | None = None) -> None:
         self.root = root.resolve()
         self.default_map = default_map
+        # Each player has its own lock: a request on one buffer never waits for work on another.
         self.players = PlayerCache()
-        # One world at a time: players are not thread-safe and the machine is small.
-        self.lock = threading.Lock()
 
     def precompute(self, stop: threading.Event) -> None:
-        """Works ahead for the most recent player, one short unit under the lock at a time so
-        requests get the lock in between."""
+        """Works ahead for the most recent player, one short unit at a time under its lock, so
+        requests on it get the lock in between."""
         while not stop.is_set():
-            with self.lock:
-                player = self.players.most_recent()
-                try:
-                    busy = player is not None and player.precompute_step()
-                except Exception:  # a buffer the world cannot play: the request path reports it
-                    busy = False
+            player = self.players.most_recent()
+            try:
+                busy = player is not None and player.precompute_step()
+            except Exception:  # a closed player, or a buffer the world cannot play (requests say why)
+                busy = False
             stop.wait(0.005 if busy else 0.2)
 
     # -- helpers ---------------------------------------------------------------------------
@@ -216,18 +214,14 @@ def create_app(
     ed = Editor(root, default_map)
 
     def api(fn: Any) -> Any:
-        """Runs a sync handler in the thread pool under the lock; errors → 400 with the message."""
+        """Runs a sync handler in the thread pool; errors → 400 (403 for refused paths)."""
 
         async def endpoint(request: Request) -> Response:
             body = await request.body() if request.method == "POST" else b""
             from starlette.concurrency import run_in_threadpool
 
-            def call() -> Response:
-                with ed.lock:
-                    return fn(request, body)
-
             try:
-                return await run_in_threadpool(call)
+                return await run_in_threadpool(fn, request, body)
             except files.PathRefused as exc:
                 return JSONResponse({"error": str(exc)}, 403)
             except (ValueError, DriveHierarchyError) as exc:
@@ -347,12 +341,15 @@ def create_app(
 
     def probe(request: Request, body: bytes) -> Response:
         d = _json(body)
+        path, text = str(ed.abs_path(_field(d, "path", str))), _field(d, "text", str)
         out = []
         for cell in PROBE_CELLS:
-            res = ed.players.get(
-                str(ed.abs_path(_field(d, "path", str))), _field(d, "text", str), int(d.get("seed", 0)), cell
-            ).run_to_end()
-            rec = res["score"]
+            # One-off players: probing does not push the previewed buffer out of the cache.
+            player = ScenePlayer(path, text, seed=int(d.get("seed", 0)), driver=cell)
+            try:
+                rec = player.run_to_end()["score"]
+            finally:
+                player.close()
             out.append(
                 {
                     "cell": cell,

@@ -10,9 +10,12 @@ deterministic, so the replay is the same episode).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import io
 import json
+import threading
 from collections import OrderedDict
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -38,6 +41,18 @@ def png_bytes(frame: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
+def _locked(method: Callable[..., Any]) -> Callable[..., Any]:
+    """Runs a player method under the player's lock (requests and the precompute thread share
+    players; the world is stepped by one thread at a time)."""
+
+    @functools.wraps(method)
+    def wrapper(self: ScenePlayer, *args: Any, **kwargs: Any) -> Any:
+        with self.lock:
+            return method(self, *args, **kwargs)
+
+    return wrapper
+
+
 class ScenePlayer:
     """One buffer (`path` + `text`, or the file itself when `text` is None) driven by `driver`."""
 
@@ -47,6 +62,7 @@ class ScenePlayer:
 
         if driver not in DRIVERS:
             raise ValueError(f"driver {driver!r}: expected one of {', '.join(DRIVERS)}")
+        self.lock = threading.RLock()
         self.seed = seed
         self.driver = driver
         self._agent = _agent(driver)
@@ -58,6 +74,7 @@ class ScenePlayer:
         self.focus = 0  # the decision last asked for: precomputing starts there
         self._reset()
 
+    @_locked
     def close(self) -> None:
         self.env.close()
 
@@ -134,10 +151,12 @@ class ScenePlayer:
         while self.live_index < index and not self.done:
             self._step()
 
+    @_locked
     def state_at(self, t: float) -> dict[str, Any]:
         self._extend_to(t)
         return self.states[self._index_at(t)]
 
+    @_locked
     def frame_at(self, t: float, view: str) -> np.ndarray:
         """The front camera ("front") or BEV ("bev") of the world at the decision at/before t."""
         self._extend_to(t)
@@ -152,6 +171,7 @@ class ScenePlayer:
             return sim.render_camera(json.dumps(dataclasses.asdict(FRONT)))
         return sim.render_bev(json.dumps(dataclasses.asdict(BEV)))
 
+    @_locked
     def png_at(self, t: float, view: str) -> tuple[bytes, float]:
         """`frame_at` as PNG (cached per decision) and the decision's time."""
         self._extend_to(t)
@@ -162,6 +182,7 @@ class ScenePlayer:
             self.frames[key] = png_bytes(self._render(index, view))
         return self.frames[key], self.states[index]["time_s"]
 
+    @_locked
     def precompute_step(self) -> bool:
         """One unit of work ahead of the page (False: nothing left): first the whole episode's
         states (so the scene at any t is a lookup), then one frame, the nearest unrendered
@@ -178,6 +199,7 @@ class ScenePlayer:
                     return True
         return False
 
+    @_locked
     def run_to_end(self) -> dict[str, Any]:
         """Drives the episode to its end; the playback (every decision's state) and the score."""
         self._extend_to(float("inf"))
@@ -191,26 +213,33 @@ class PlayerCache:
     def __init__(self, size: int = 4) -> None:
         self.size = size
         self._players: OrderedDict[tuple[str, str | None, int, str], ScenePlayer] = OrderedDict()
+        self._lock = threading.Lock()
 
     def most_recent(self) -> ScenePlayer | None:
-        return next(reversed(self._players.values()), None)
+        with self._lock:
+            return next(reversed(self._players.values()), None)
 
     def get(self, path: str, text: str | None, seed: int = 0, driver: str = "expert") -> ScenePlayer:
         key = (path, text, seed, driver)
-        player = self._players.get(key)
-        if player is None:
-            player = ScenePlayer(path, text, seed=seed, driver=driver)
-            self._players[key] = player
-            while len(self._players) > self.size:
-                _, old = self._players.popitem(last=False)
-                old.close()
-        self._players.move_to_end(key)
+        old: list[ScenePlayer] = []
+        with self._lock:
+            player = self._players.get(key)
+            if player is None:
+                player = ScenePlayer(path, text, seed=seed, driver=driver)
+                self._players[key] = player
+                while len(self._players) > self.size:
+                    old.append(self._players.popitem(last=False)[1])
+            self._players.move_to_end(key)
+        for p in old:
+            p.close()  # waits for a request or the precompute thread still using it
         return player
 
     def close(self) -> None:
-        for p in self._players.values():
+        with self._lock:
+            players = list(self._players.values())
+            self._players.clear()
+        for p in players:
             p.close()
-        self._players.clear()
 
 
 def preview_frames(path: str, time_s: float, *, seed: int = 0, text: str | None = None) -> dict[str, bytes]:
