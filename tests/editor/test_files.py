@@ -46,11 +46,17 @@ def test_append_and_delete() -> None:
     )
 
 
+def test_a_key_of_a_missing_table_makes_the_table() -> None:
+    out = apply_edits(TEXT, [{"path": ["traffic", "mode"], "value": "native"}])
+    assert out == TEXT + '\n[traffic]\nmode = "native"\n' or out.endswith('[traffic]\nmode = "native"\n')
+    assert apply_edits(out, [{"path": ["traffic", "mode"], "delete": True}]).startswith(TEXT)
+
+
 @pytest.mark.parametrize(
     "edit",
     [
         {"path": [], "value": 1},
-        {"path": ["nope", "x"], "value": 1},
+        {"path": ["nope", "x"], "delete": True},
         {"path": ["actors", 5, "name"], "value": "x"},
         {"path": ["id"]},
         {"path": ["nope"], "delete": True},

@@ -16,7 +16,7 @@ import contextlib
 import json
 import os
 import threading
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -107,11 +107,27 @@ class Editor:
         self.default_map = default_map
         # Each player has its own lock: a request on one buffer never waits for work on another.
         self.players = PlayerCache()
+        # Requests being served: the precompute thread yields the CPU to them.
+        self.in_flight = 0
+        self._count_lock = threading.Lock()
+
+    @contextlib.contextmanager
+    def serving(self) -> Iterator[None]:
+        with self._count_lock:
+            self.in_flight += 1
+        try:
+            yield
+        finally:
+            with self._count_lock:
+                self.in_flight -= 1
 
     def precompute(self, stop: threading.Event) -> None:
         """Works ahead for the most recent player, one short unit at a time under its lock, so
         requests on it get the lock in between."""
         while not stop.is_set():
+            if self.in_flight:
+                stop.wait(0.02)
+                continue
             player = self.players.most_recent()
             try:
                 busy = player is not None and player.precompute_step()
@@ -221,7 +237,8 @@ def create_app(
             from starlette.concurrency import run_in_threadpool
 
             try:
-                return await run_in_threadpool(fn, request, body)
+                with ed.serving():
+                    return await run_in_threadpool(fn, request, body)
             except files.PathRefused as exc:
                 return JSONResponse({"error": str(exc)}, 403)
             except (ValueError, DriveHierarchyError) as exc:

@@ -130,6 +130,11 @@ def apply_edits(text: str, edits: list[dict[str, Any]]) -> str:
         where = path_str(path)
         parent: Any = doc
         for k in path[:-1]:
+            if isinstance(k, str) and isinstance(parent, dict) and k not in parent and "delete" not in e:
+                # Setting a key of a missing table makes the table: `[traffic]` at the top,
+                # an inline `{ ... }` inside an entry.
+                top = isinstance(parent, tomlkit.TOMLDocument)
+                parent[k] = tomlkit.table() if top else tomlkit.inline_table()
             try:
                 parent = _container(parent, k)
             except ValueError as exc:
