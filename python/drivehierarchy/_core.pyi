@@ -139,9 +139,10 @@ def openloop_frozen_weights() -> dict[str, float]: ...
 def openloop_calibrate(
     tasks: list[str],
     scores: list[list[float]],
-    lambda_same: float = 1.0,
-    lambda_cross: float = 0.35,
-    gamma: float = 2.0,
+    lambda_same: float | None = None,
+    lambda_cross: float | None = None,
+    gamma: float | None = None,
     budgets: dict[str, float] | None = None,
 ) -> dict[str, Any]: ...
+def openloop_calibration_defaults() -> dict[str, Any]: ...
 def openloop_spearman(x: list[float], y: list[float]) -> float: ...
