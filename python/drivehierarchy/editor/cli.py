@@ -49,6 +49,9 @@ def _editor(args: argparse.Namespace) -> int:
         sock.bind((HOST, args.port))
     except OSError as exc:
         raise ConfigError(f"--port {args.port}: cannot listen on {HOST}: {exc}") from exc
+    # Listening before the URL is printed: a client that connects at once waits in the
+    # backlog until uvicorn accepts.
+    sock.listen(128)
     port = sock.getsockname()[1]
     url = f"http://{HOST}:{port}/" + (f"#{open_rel}" if open_rel else "")
     print(f"drivehierarchy editor: {url}  (root {root.resolve()}; Ctrl-C stops)", flush=True)
