@@ -265,3 +265,26 @@ def test_precomputed_frames_equal_rendered_ones(workspace: Path) -> None:
     finally:
         fresh.close()
         ed.players.close()
+
+
+def test_sumo_maps_are_drawn_and_snapped(client) -> None:
+    """`sumo:` maps (under the installed SUMO) work like project maps."""
+    spec = "sumo:tools/game/A10KW/osm.net.xml"
+    r = client.get("/api/map", params={"map": spec})
+    if r.status_code == 400 and "SUMO" in r.json().get("error", ""):
+        pytest.skip("no SUMO_HOME in this environment")
+    g = r.json()
+    assert r.status_code == 200 and len(g["lanes"]) > 50, g.get("error")
+    lane = next(
+        ln for ln in g["lanes"] if ln["drivable"] and ln["function"] == "normal" and ln["length_m"] > 20
+    )
+    x, y = lane["shape"][0]
+    (x1, y1) = lane["shape"][1]
+    f = 5.0 / max(1e-9, ((x1 - x) ** 2 + (y1 - y) ** 2) ** 0.5)
+    r = client.post(
+        "/api/snap",
+        json={"path": PED, "map": spec, "x": x + f * (x1 - x), "y": y + f * (y1 - y), "vclass": "passenger"},
+        headers=ORIGIN,
+    )
+    hit = r.json()
+    assert hit["lane"] is not None and hit["distance_m"] < 1.0
