@@ -16,6 +16,7 @@ _AREAS = (
     "drivehierarchy.benchmark.r4.cli",
     "drivehierarchy.scenario_cli",
     "drivehierarchy.map_cli",
+    "drivehierarchy.editor.cli",
 )
 
 

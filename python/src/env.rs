@@ -17,12 +17,12 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock};
 
 /// Networks parsed once per process, shared by every env on the same map.
-fn map_cache() -> Arc<MapCache> {
+pub(crate) fn map_cache() -> Arc<MapCache> {
     static CACHE: OnceLock<Arc<MapCache>> = OnceLock::new();
     CACHE.get_or_init(|| Arc::new(MapCache::new())).clone()
 }
 
-fn err(py: Python<'_>, e: dh_env::Error) -> PyErr {
+pub(crate) fn err(py: Python<'_>, e: dh_env::Error) -> PyErr {
     to_pyerr(py, e)
 }
 
@@ -37,12 +37,25 @@ pub struct PySim {
 #[pymethods]
 impl PySim {
     #[new]
-    #[pyo3(signature = (scenario, config_json, sumo_home=None))]
-    fn new(py: Python<'_>, scenario: &str, config_json: &str, sumo_home: Option<PathBuf>) -> PyResult<Self> {
+    /// `text`: the scenario's TOML standing for the file at `scenario` (an editor's unsaved
+    /// buffer; relative paths and error messages still refer to `scenario`).
+    #[pyo3(signature = (scenario, config_json, sumo_home=None, text=None))]
+    fn new(
+        py: Python<'_>,
+        scenario: &str,
+        config_json: &str,
+        sumo_home: Option<PathBuf>,
+        text: Option<&str>,
+    ) -> PyResult<Self> {
         let config = SimConfig::from_json(config_json).map_err(|e| err(py, e))?;
         let load = LoadOptions { sumo_home, cache: Some(map_cache()) };
         let path = Path::new(scenario).to_path_buf();
-        let inner = py.detach(|| Sim::new(&path, config, &load)).map_err(|e| err(py, e))?;
+        let inner = py
+            .detach(|| match text {
+                None => Sim::new(&path, config, &load),
+                Some(t) => Sim::from_scenario(crate::editor::resolve_text(&path, t, &load)?, config),
+            })
+            .map_err(|e| err(py, e))?;
         let expert = Expert::new(ExpertParams::default()).map_err(|e| err(py, e))?;
         Ok(PySim { inner, expert, expert_bridge: ActuationBridge::new() })
     }

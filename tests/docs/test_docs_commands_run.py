@@ -21,6 +21,7 @@ import shutil
 import subprocess
 import sys
 import time
+import urllib.request
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -58,6 +59,7 @@ SCALE: list[tuple[str, str]] = [
         "probe scenarios/r4/07_sudden_brake --policies expert --seeds 0 ",
     ),
     (r"r4 gallery$", "r4 gallery --out gallery"),
+    (r"--port \d+", "--port 0"),  # servers: any free port
 ]
 # Commands a page's commands build on, run first in the page's folder (argv after the program).
 GIVEN: dict[str, list[str | Callable[[Path], None]]] = {
@@ -230,6 +232,26 @@ def folders(server: Path, official_dir: Path, tmp_path_factory: pytest.TempPathF
     return get
 
 
+# Commands that serve until stopped: each must print its URL and serve its page, then is stopped.
+SERVERS = ("editor",)
+
+
+def _serve_once(argv: list[str], folder: Path, env: dict[str, str]) -> None:
+    proc = subprocess.Popen(
+        [str(DRIVEHIERARCHY), *argv], cwd=folder, env=env, stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline()
+        m = re.search(r"http://127\.0\.0\.1:\d+/", line)
+        assert m, f"drivehierarchy {shlex.join(argv)}: no URL printed: {line!r}"
+        with urllib.request.urlopen(m.group(0), timeout=60) as r:
+            assert r.status == 200 and b"<canvas" in r.read()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+
+
 @pytest.mark.parametrize("page", PAGE_CASES)
 def test_documented_commands_run(page: str, folders: Any) -> None:
     folder, ran = folders(page)
@@ -248,6 +270,10 @@ def test_documented_commands_run(page: str, folders: Any) -> None:
         if tuple(argv) in ran:
             continue  # shown on an earlier page, ran there in this folder
         t0 = time.monotonic()
+        if argv[0] in SERVERS:
+            _serve_once(argv, folder, env)
+            ran.add(tuple(argv))
+            continue
         done = subprocess.run(
             [str(DRIVEHIERARCHY), *argv], cwd=folder, env=env, capture_output=True, text=True, timeout=600
         )
