@@ -334,6 +334,39 @@ impl PySim {
         Ok(arr.into_pyarray(py))
     }
 
+    /// Active actors (ego excluded, sorted by id) with what `actors_array` leaves out: one dict
+    /// each of id, kind, x, y, yaw, speed_mps, length_m, width_m, height_m, color (sRGB),
+    /// braking, blinkers, motion (`static`/`scripted`/`external`/`traffic`).
+    fn actor_views<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        let world = self.inner.world().map_err(|e| err(py, e))?;
+        let out = PyList::empty(py);
+        for a in world.actors() {
+            let d = PyDict::new(py);
+            let kind = serde_json::to_value(a.kind).map_err(|e| err(py, dh_env::Error::Simulation(e.to_string())))?;
+            d.set_item("id", a.id)?;
+            d.set_item("kind", kind.as_str().unwrap_or_default())?;
+            d.set_item("x", a.pose.pos.x)?;
+            d.set_item("y", a.pose.pos.y)?;
+            d.set_item("yaw", a.pose.yaw)?;
+            d.set_item("speed_mps", a.speed_mps)?;
+            d.set_item("length_m", a.length_m)?;
+            d.set_item("width_m", a.width_m)?;
+            d.set_item("height_m", a.height_m)?;
+            d.set_item("color", a.color.map(u32::from).to_vec())?;
+            d.set_item("braking", a.braking)?;
+            d.set_item("blinkers", a.blinkers)?;
+            d.set_item("motion", world.actor_motion(a.id).unwrap_or("unknown"))?;
+            out.append(d)?;
+        }
+        Ok(out)
+    }
+
+    /// Simulated time of the running episode, seconds.
+    #[getter]
+    fn time_s(&self, py: Python<'_>) -> PyResult<f64> {
+        Ok(self.inner.world().map_err(|e| err(py, e))?.time_s())
+    }
+
     /// The ego as `[x, y, yaw, speed_mps, length_m, width_m]`.
     fn ego_array<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let world = self.inner.world().map_err(|e| err(py, e))?;
