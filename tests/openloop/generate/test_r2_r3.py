@@ -162,6 +162,12 @@ def test_states_and_outcomes_come_from_what_actors_did(records, moments) -> None
         assert md["is_state_change"] == (start != end)
         text = rec["answer"][3:]
         assert (start in text and end in text) if start != end else text == f"No Change (It remains {start})."
+
+        # No distractor differs from the key only by parked ↔ stopped (they look alike).
+        def look(t: str) -> str:
+            return t[3:].replace("parked", "still").replace("stopped", "still")
+
+        assert [look(o) for o in rec["options"]].count(look(rec["answer"])) == 1
     for rec in records["R3_1"]:
         md = rec["meta_data"]
         assert rec["answer"] in rec["options"] and rec["answer"][3:] == md["standardized_answer"]

@@ -314,8 +314,16 @@ def build_r2_2_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[
             assert s is not None and e is not None
             answer = transition_text(s, e)
             states = STATES[cat]
-            pool = [transition_text(a, b) for a in states for b in states]
-            pool = [p for p in pool if p != answer]
+            # A parked and a stopped vehicle look alike in a clip: no distractor differs from
+            # the key only by that swap.
+            look = {"parked": "still", "stopped": "still"}
+            seen = (look.get(s, s), look.get(e, e))
+            pool = [
+                transition_text(a, b)
+                for a in states
+                for b in states
+                if (look.get(a, a), look.get(b, b)) != seen
+            ]
             others = sorted(pool)
             rng.shuffle(others)
             u, v = target.center_px

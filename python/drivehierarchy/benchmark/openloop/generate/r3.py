@@ -43,7 +43,8 @@ VOCABULARY = (
 )  # fmt: skip
 # Options that are false for an actor whose outcome is the key (and not vague about it): the
 # path labels exclude speed labels the actor may also fit, and the other way round.
-_PATH_FALSE = (TURN_LEFT, TURN_RIGHT, LANE_LEFT, LANE_RIGHT, BACK_UP, REVERSE_PARKING, STATIONARY)
+# (Not "Stationary": a car that starts after two seconds was stationary for most of them.)
+_PATH_FALSE = (TURN_LEFT, TURN_RIGHT, LANE_LEFT, LANE_RIGHT, BACK_UP, REVERSE_PARKING)
 DISTRACTORS: dict[str, tuple[str, ...]] = {
     TURN_LEFT: (STRAIGHT, TURN_RIGHT, LANE_RIGHT, BACK_UP, REVERSE_PARKING, STATIONARY),
     TURN_RIGHT: (STRAIGHT, TURN_LEFT, LANE_LEFT, BACK_UP, REVERSE_PARKING, STATIONARY),
@@ -143,7 +144,8 @@ def build_r3_1(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
             x0, y0, x1, y1 = target.bbox
             u, v = target.center_px
             tag = f"<c1,{FRONT},{u:.1f},{v:.1f}>"
-            desc = f"{a.colour.capitalize()} {NOUN[a.subtype]}"
+            noun = NOUN[a.subtype]
+            desc = f"{noun} wearing {a.colour}" if noun == "pedestrian" else f"{a.colour.capitalize()} {noun}"
             rec = {
                 "scene_token": scene_token(m),
                 "frame_token": sample_token(m),
