@@ -62,7 +62,7 @@ IMAGE_SIZE = (1600, 900)  # the original's nuScenes front camera
 # Visibility rule: an actor counts in a camera only when it is inside the frustum, at least
 # MIN_VISIBLE_FRACTION of its silhouette is unoccluded in the id buffer and it covers at least
 # MIN_VISIBLE_PIXELS unoccluded pixels (at 1600×900).
-MIN_VISIBLE_PIXELS = 400
+MIN_VISIBLE_PIXELS = 200
 MIN_VISIBLE_FRACTION = 0.35
 
 # nuScenes-like rig (the Rust `CameraConfig::surround_rig`), rendered at IMAGE_SIZE.
@@ -320,7 +320,7 @@ class Moment:
         return None if any(f is None for f in out) else out  # type: ignore[return-value]
 
     def future(self, actor_id: int, horizon_s: float) -> list[ActorState]:
-        n = int(round(horizon_s * DECISION_HZ))
+        n = round(horizon_s * DECISION_HZ)
         out = []
         for _, _, actors in self.rollout.states[self.step + 1 : self.step + 1 + n]:
             if actor_id not in actors:
@@ -329,7 +329,7 @@ class Moment:
         return out
 
     def ego_future(self, horizon_s: float) -> list[EgoState]:
-        n = int(round(horizon_s * DECISION_HZ))
+        n = round(horizon_s * DECISION_HZ)
         return [e for _, e, _ in self.rollout.states[self.step + 1 : self.step + 1 + n]]
 
 
@@ -443,12 +443,19 @@ def _visible(
             continue
         total = int(p["pixel_count"])
         frac = float(p["visible_fraction"])
-        vis = int(round(total * frac))
+        vis = round(total * frac)
         if vis == 0:
             continue
         x0, y0, x1, y1 = (float(v) for v in p["bbox_px"])
-        box = (max(0, int(x0)), max(0, int(y0)), min(w - 1, int(math.ceil(x1)) - 1), min(h - 1, int(math.ceil(y1)) - 1))
-        ok = vis >= MIN_VISIBLE_PIXELS and frac >= MIN_VISIBLE_FRACTION and box[2] > box[0] and box[3] > box[1]
+        box = (
+            max(0, int(x0)),
+            max(0, int(y0)),
+            min(w - 1, math.ceil(x1) - 1),
+            min(h - 1, math.ceil(y1) - 1),
+        )
+        ok = (
+            vis >= MIN_VISIBLE_PIXELS and frac >= MIN_VISIBLE_FRACTION and box[2] > box[0] and box[3] > box[1]
+        )
         (out if ok else partial).append(
             Visible(
                 actor=a,
@@ -498,9 +505,11 @@ def rollout(
         obs, info = env.reset(seed=seed)
         agent.reset(env, info)
         ro = Rollout(str(scenario), sim.scenario_id, sim.category, driver, seed, split)
-        spacing = max(1, int(round(spacing_s * DECISION_HZ)))
+        spacing = max(1, round(spacing_s * DECISION_HZ))
         max_steps = int(max_s * DECISION_HZ)
-        ro.anchors = choose_anchors(seed, f"{ro.scenario_id}|{driver}", max_steps, spacing, int(first_s * DECISION_HZ))
+        ro.anchors = choose_anchors(
+            seed, f"{ro.scenario_id}|{driver}", max_steps, spacing, int(first_s * DECISION_HZ)
+        )
         plan: dict[int, set[str]] = {}
         for a in ro.anchors:
             for s, cams in frame_plan(needs, a).items():
@@ -524,7 +533,9 @@ def rollout(
             obs, _, terminated, truncated, info = env.step(action)
             step += 1
             if terminated or truncated or step >= max_steps:
-                ro.termination = str(info.get("termination_reason") or ("max_steps" if step >= max_steps else ""))
+                ro.termination = str(
+                    info.get("termination_reason") or ("max_steps" if step >= max_steps else "")
+                )
                 break
         # The final state has no action; anchors need a state, so keep them inside.
         ro.anchors = [s for s in ro.anchors if s < len(ro.states)]
