@@ -145,6 +145,7 @@ def test_relations_follow_the_ego_frame_positions(records) -> None:
         by_id = {str(v.actor.id): v for v in f.visible}
         subj, ref = by_id[md["subject_instance_token"]], by_id[md["reference_instance_token"]]
         assert list(subj.center_px) == md["subject_pixel"] and list(ref.center_px) == md["reference_pixel"]
+        assert max(subj.distance_m, ref.distance_m) <= r2.RELATION_MAX_DISTANCE_M
         fwd = md["subject_ego_xy"][0] - md["reference_ego_xy"][0]
         left = md["subject_ego_xy"][1] - md["reference_ego_xy"][1]
         angle = math.degrees(math.atan2(left, fwd))

@@ -71,6 +71,8 @@ RELATIONS = (
 # no-ask margin) and at least this far apart.
 RELATION_MARGIN_DEG = 12.0
 RELATION_MIN_GAP_M = 3.0
+# Farther than this, depth is hard to judge in the image: neither object may be.
+RELATION_MAX_DISTANCE_M = 35.0
 RELATION_CATEGORIES = ("Vehicle", "Pedestrian", "Bicycle", "Motorcycle", "Traffic Cone")
 
 
@@ -405,7 +407,9 @@ def build_r2_3(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
         objs = [
             v
             for v in f.visible
-            if v.actor.category in RELATION_CATEGORIES and point_is_unique(f, v, v.center_px)
+            if v.actor.category in RELATION_CATEGORIES
+            and v.distance_m <= RELATION_MAX_DISTANCE_M
+            and point_is_unique(f, v, v.center_px)
         ]
         for subj in objs:
             for ref in objs:

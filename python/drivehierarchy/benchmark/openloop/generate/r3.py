@@ -24,6 +24,8 @@ from .r2 import _balance_by, _finish, image_path, point_is_unique, sample_token,
 from .rollout import FRONT, Moment, Needs, register
 
 HORIZON_S = 3.0
+# Actors farther than this are a few pixels wide: not asked about.
+OUTCOME_MAX_DISTANCE_M = 40.0
 R3_1_QUESTION = "What is the future state of the {desc}. located at [{x0:.1f}, {y0:.1f}, {x1:.1f}, {y1:.1f}]?"
 # The original's vocabulary (R3_1_Outcome_Prediction.jsonl), without the final period.
 STRAIGHT = "Keep going straight"
@@ -126,7 +128,9 @@ def build_r3_1(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
             continue
         for target in f.visible:
             a = target.actor
-            if a.subtype not in NOUN or not point_is_unique(f, target, target.center_px):
+            if target.distance_m > OUTCOME_MAX_DISTANCE_M or a.subtype not in NOUN:
+                continue
+            if not point_is_unique(f, target, target.center_px):
                 continue
             future = m.future(a.id, HORIZON_S)
             if len(future) < steps:
