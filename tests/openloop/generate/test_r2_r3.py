@@ -246,6 +246,8 @@ def test_relation_and_region_rules() -> None:
     assert r2.relation((0.0, 5.0), (0.0, 0.0)) == "Left"
     assert r2.relation((10.0, 4.0), (0.0, 0.0)) is None  # 22°: between Front and Front-Left
     assert r2.relation((1.0, 1.0), (0.0, 0.0)) is None  # too close to tell
+    assert r2.relation((5.0, 3.5), (2.0, 0.0)) == "Front-Left"
+    assert r2.relation((30.0, 3.5), (27.0, 0.0)) is None  # the same 3 m of depth, 30 m away
     assert r2.region(953, 485, (1600, 900)) == "middle-center"  # the original's own examples
     assert r2.region(527, 499, (1600, 900)) == "middle-left"
     assert r2.region(1599, 511, (1600, 900)) == "middle-right"

@@ -69,10 +69,13 @@ RELATIONS = (
 )
 # Only pairs within this many degrees of a sector's centre (sectors are 45° wide; the rest is a
 # no-ask margin) and at least this far apart.
-RELATION_MARGIN_DEG = 12.0
+RELATION_MARGIN_DEG = 15.0
 RELATION_MIN_GAP_M = 3.0
+# ... and at least this share of the farther one's distance from the ego: a few metres of depth
+# show at 10 m, not at 30 m.
+RELATION_MIN_GAP_SHARE = 0.25
 # Farther than this, depth is hard to judge in the image: neither object may be.
-RELATION_MAX_DISTANCE_M = 35.0
+RELATION_MAX_DISTANCE_M = 40.0
 RELATION_CATEGORIES = ("Vehicle", "Pedestrian", "Bicycle", "Motorcycle", "Traffic Cone")
 
 
@@ -386,7 +389,8 @@ def ego_xy(m: Moment, x: float, y: float) -> tuple[float, float]:
 def relation(subject: tuple[float, float], reference: tuple[float, float]) -> str | None:
     """Sector of `subject` seen from `reference`, in the ego's axes; None inside a margin."""
     fwd, left = subject[0] - reference[0], subject[1] - reference[1]
-    if math.hypot(fwd, left) < RELATION_MIN_GAP_M:
+    far = max(math.hypot(*subject), math.hypot(*reference))
+    if math.hypot(fwd, left) < max(RELATION_MIN_GAP_M, RELATION_MIN_GAP_SHARE * far):
         return None
     angle = math.degrees(math.atan2(left, fwd))
     for centre, name in RELATIONS:
