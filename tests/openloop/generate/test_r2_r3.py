@@ -153,6 +153,10 @@ def test_relations_follow_the_ego_frame_positions(records) -> None:
         assert abs((angle - centre + 180) % 360 - 180) <= r2.RELATION_MARGIN_DEG
         letter = rec["answer"]
         assert rec["options"][ord(letter) - 65] == f"{letter}. {md['gt_relation']}."
+        for option in rec["options"]:  # no distractor in a neighbouring sector
+            other = option[3:-1]
+            gap = abs((dict((n, c) for c, n in r2.RELATIONS)[other] - centre + 180) % 360 - 180)
+            assert other == md["gt_relation"] or gap >= 90
 
 
 def test_states_and_outcomes_come_from_what_actors_did(records, moments) -> None:

@@ -400,6 +400,11 @@ def relation(subject: tuple[float, float], reference: tuple[float, float]) -> st
     return None
 
 
+def _sector_gap(a: str, b: str) -> float:
+    centre = {name: c for c, name in RELATIONS}
+    return abs((centre[a] - centre[b] + 180.0) % 360.0 - 180.0)
+
+
 @register("R2_3", Needs())
 def build_r2_3(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str, Any]]:
     cands = []
@@ -424,7 +429,9 @@ def build_r2_3(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
                 rel = relation(sxy, rxy)
                 if rel is None:
                     continue
-                others = [x for x in names if x != rel]
+                # No neighbouring sector among the distractors: "Rear" and "Rear-Right" can
+                # both describe a car 15 m behind and one lane over.
+                others = [x for x in names if _sector_gap(x, rel) >= 90.0]
                 rng.shuffle(others)
                 (su, sv), (ru, rv) = subj.center_px, ref.center_px
                 rec = {
