@@ -220,18 +220,21 @@ impl PySim {
         cam.validate().map_err(|e| err(py, e))?;
         let inner = &self.inner;
         let found = py.detach(|| inner.project_actors(&cam)).map_err(|e| err(py, e))?;
-        let out = PyList::empty(py);
-        for a in found {
-            let d = PyDict::new(py);
-            d.set_item("id", a.id)?;
-            d.set_item("bbox_px", a.bbox_px.to_vec())?;
-            d.set_item("center_px", a.center_px.to_vec())?;
-            d.set_item("distance_m", a.distance_m)?;
-            d.set_item("visible_fraction", a.visible_fraction)?;
-            d.set_item("pixel_count", a.pixel_count)?;
-            out.append(d)?;
-        }
-        Ok(out)
+        projected_to_py(py, found)
+    }
+
+    /// `(render_camera(cfg), project_actors(cfg))` from one raster pass (same values).
+    fn render_and_project<'py>(
+        &self,
+        py: Python<'py>,
+        config_json: &str,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyList>)> {
+        let cam: CameraConfig = parse_json(py, "camera", config_json)?;
+        cam.validate().map_err(|e| err(py, e))?;
+        let mut img = Image::default();
+        let inner = &self.inner;
+        let found = py.detach(|| inner.render_and_project(&cam, &mut img)).map_err(|e| err(py, e))?;
+        Ok((image_to_py(py, img)?, projected_to_py(py, found)?))
     }
 
     /// The scene score record so far (final once terminated), as a dict.
@@ -342,7 +345,8 @@ impl PySim {
         let out = PyList::empty(py);
         for a in world.actors() {
             let d = PyDict::new(py);
-            let kind = serde_json::to_value(a.kind).map_err(|e| err(py, dh_env::Error::Simulation(e.to_string())))?;
+            let kind = serde_json::to_value(a.kind)
+                .map_err(|e| err(py, dh_env::Error::Simulation(e.to_string())))?;
             d.set_item("id", a.id)?;
             d.set_item("kind", kind.as_str().unwrap_or_default())?;
             d.set_item("x", a.pose.pos.x)?;
@@ -386,6 +390,25 @@ impl PySim {
             .map(|l| (l.tl_id.clone(), l.lane_id.clone(), format!("{:?}", l.color).to_lowercase()))
             .collect())
     }
+}
+
+fn projected_to_py<'py>(
+    py: Python<'py>,
+    found: Vec<dh_env::render::ProjectedActor>,
+) -> PyResult<Bound<'py, PyList>> {
+    let out = PyList::empty(py);
+
+    for a in found {
+        let d = PyDict::new(py);
+        d.set_item("id", a.id)?;
+        d.set_item("bbox_px", a.bbox_px.to_vec())?;
+        d.set_item("center_px", a.center_px.to_vec())?;
+        d.set_item("distance_m", a.distance_m)?;
+        d.set_item("visible_fraction", a.visible_fraction)?;
+        d.set_item("pixel_count", a.pixel_count)?;
+        out.append(d)?;
+    }
+    Ok(out)
 }
 
 fn parse_json<T: serde::de::DeserializeOwned>(py: Python<'_>, field: &str, text: &str) -> PyResult<T> {

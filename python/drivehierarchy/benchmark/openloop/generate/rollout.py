@@ -427,7 +427,7 @@ def encode_jpeg(arr: np.ndarray, quality: int = 90) -> bytes:
     from PIL import Image
 
     buf = io.BytesIO()
-    Image.fromarray(arr).save(buf, format="JPEG", quality=quality, optimize=False)
+    Image.fromarray(arr).save(buf, format="JPEG", quality=quality, subsampling=2, optimize=False)
     return buf.getvalue()
 
 
@@ -485,14 +485,16 @@ def rollout(
     seed: int,
     needs: Sequence[Needs],
     *,
+    shares: Sequence[float] | None = None,
     split: str = "eval",
-    spacing_s: float = 6.0,
+    spacing_s: float = 4.0,
     first_s: float = 2.0,
     max_s: float = 90.0,
     size: tuple[int, int] = IMAGE_SIZE,
     traffic: str | None = None,
 ) -> Rollout:
-    """Drives one scenario to its end with `driver`, rendering the planned frames on the way."""
+    """Drives one scenario to its end with `driver`, rendering the planned frames on the way:
+    `needs[j]` at the anchors whose seeded draw falls below `shares[j]` (default all)."""
     from drivehierarchy.envs.r4 import DriveHierarchyR4Env
 
     overrides: dict[str, Any] = {"front": None, "bev": None, "prompt": False}
@@ -511,8 +513,13 @@ def rollout(
             seed, f"{ro.scenario_id}|{driver}", max_steps, spacing, int(first_s * DECISION_HZ)
         )
         plan: dict[int, set[str]] = {}
+        shares = [1.0] * len(needs) if shares is None else list(shares)
         for a in ro.anchors:
-            for s, cams in frame_plan(needs, a).items():
+            # One draw per anchor for all needs: the costly frames (clips, surround) of
+            # different tasks land on the same anchors and are rendered once.
+            u = random.Random(f"{seed}|{ro.scenario_id}|{driver}|{a}").random()
+            picked = [nd for nd, share in zip(needs, shares, strict=True) if u < share]
+            for s, cams in frame_plan(picked, a).items():
                 plan.setdefault(s, set()).update(cams)
         cfgs = {name: json.dumps(camera_config(name, size)) for name in SURROUND}
         step = 0
@@ -523,8 +530,8 @@ def rollout(
             exp = sim.expert_action()
             ro.expert_actions.append((float(exp[0]), float(exp[1])))
             for cam in sorted(plan.get(step, ())):
-                img = sim.render_camera(cfgs[cam])
-                vis, part = _visible(sim.project_actors(cfgs[cam]), actors, size)
+                img, found = sim.render_and_project(cfgs[cam])
+                vis, part = _visible(found, actors, size)
                 jpg = encode_jpeg(np.asarray(img))
                 ro.frames[(cam, step)] = Frame(cam, step, float(sim.time_s), size, jpg, vis, part)
             action = agent.act(obs, info)

@@ -30,8 +30,14 @@ SPLITS = ("eval", "train")
 # R4 plays seeds 0–4 (docs/suite.md); the train split never uses them.
 EVAL_SEEDS = (0, 1, 2, 3, 4)
 TRAIN_SEED_BASE = 100_000
-# Rollouts per record asked of each task (each rollout yields ~5 moments).
-ROLLOUTS_PER_RECORD = 0.5
+# Rollouts per record asked of each task (each rollout yields ~8 moments).
+ROLLOUTS_PER_RECORD = 0.25
+MOMENTS_PER_ROLLOUT = 8.0
+# Costly frames (clips, history, surround) are rendered at only as many anchors as give each
+# task this many times the records asked for (cheap front-only needs: at every anchor).
+OVERSAMPLE = 1.5
+# Enough scenes for small sets (tests) to have an answer for every task.
+MIN_ROLLOUTS = 10
 
 
 @dataclass(frozen=True)
@@ -71,7 +77,7 @@ def plan_episodes(
         for k in sorted(by_cat):
             if by_cat[k]:
                 order.append(by_cat[k].pop())
-    n = max(2, round(per_task * ROLLOUTS_PER_RECORD))
+    n = max(MIN_ROLLOUTS, round(per_task * ROLLOUTS_PER_RECORD))
     eps = []
     for i in range(n):
         f = order[i % len(order)]
@@ -85,24 +91,35 @@ def plan_episodes(
     return eps
 
 
-def _run(ep: Episode, needs: tuple[Needs, ...], split: str) -> Rollout:
-    return rollout(ep.scenario, ep.driver, ep.seed, needs, split=split)
+def _run(ep: Episode, needs: tuple[Needs, ...], shares: tuple[float, ...], split: str) -> Rollout:
+    return rollout(ep.scenario, ep.driver, ep.seed, needs, shares=shares, split=split)
+
+
+def need_shares(needs: tuple[Needs, ...], per_task: int, n_rollouts: int) -> tuple[float, ...]:
+    """Share of anchors at which each need's frames are rendered."""
+    est = OVERSAMPLE * per_task / max(1.0, n_rollouts * MOMENTS_PER_ROLLOUT)
+    return tuple(1.0 if nd == Needs() else min(1.0, est) for nd in needs)
 
 
 def run_rollouts(
-    eps: list[Episode], needs: tuple[Needs, ...], split: str, jobs: int, progress: bool
+    eps: list[Episode],
+    needs: tuple[Needs, ...],
+    shares: tuple[float, ...],
+    split: str,
+    jobs: int,
+    progress: bool,
 ) -> list[Rollout]:
     t0 = time.perf_counter()
     if jobs <= 1:
         out = []
         for i, ep in enumerate(eps):
-            out.append(_run(ep, needs, split))
+            out.append(_run(ep, needs, shares, split))
             if progress:
                 print(f"[{i + 1}/{len(eps)} {time.perf_counter() - t0:5.0f}s] {ep.scenario}", file=sys.stderr)
         return out
     ctx = mp.get_context("spawn")
     with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
-        futs = [pool.submit(_run, ep, needs, split) for ep in eps]
+        futs = [pool.submit(_run, ep, needs, shares, split) for ep in eps]
         out = []
         for i, fut in enumerate(futs):
             try:
@@ -150,7 +167,8 @@ def generate(
     files = suite_files(suite)
     eps = plan_episodes(files, per_task, seed, split, drivers)
     needs = tuple(nd for _, nd in registry.values())
-    rollouts = run_rollouts(eps, needs, split, jobs, progress)
+    shares = need_shares(needs, per_task, len(eps))
+    rollouts = run_rollouts(eps, needs, shares, split, jobs, progress)
     moments: list[Moment] = [m for r in rollouts for m in r.moments()]
     ours = (out / "generation.json").is_file()  # regenerating over an earlier set
     out.mkdir(parents=True, exist_ok=True)
