@@ -173,3 +173,60 @@ def test_r4_runs_of_different_suites_are_refused(runs: dict[str, Path], tmp_path
     (other / "summary.json").write_text(json.dumps(summary))
     with pytest.raises(ConfigError, match="the models drove different R4 suites"):
         hierarchy.collect([*_pairs(runs)[:4], f"poor={runs['ol_poor']}", f"poor={other}"], partial=True)
+
+
+# -- end to end on a generated set ---------------------------------------------------------------
+GENERATED_SUITE = (
+    "06_traffic_flow/town01_03_stop_and_go_queue.toml",
+    "04_intersection/town01_04_straight_cross_traffic.toml",
+    "01_pedestrian/town01_01_midblock_crossing.toml",
+)
+
+
+@pytest.fixture(scope="module")
+def generated(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """`openloop generate` over three suite scenarios (maps linked beside them, as a suite folder)."""
+    if sumo_home() is None:
+        pytest.skip("eclipse-sumo is not installed")
+    root = tmp_path_factory.mktemp("gen_suite")
+    (root / "maps").symlink_to(builtin_root() / "maps")
+    for name in GENERATED_SUITE:
+        (root / "r4" / name).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(builtin_root() / "r4" / name, root / "r4" / name)
+    out = root / "gen"
+    assert main(["openloop", "generate", "--suite", str(root / "r4"), "--out", str(out), "--per-task", "6",
+                 "--jobs", "1", "--no-progress"]) == 0  # fmt: skip
+    return out
+
+
+def test_generate_predict_score_report_end_to_end(
+    generated: Path, runs: dict[str, Path], tmp_path: Path, capsys
+) -> None:
+    cat = default_catalog(generated)
+    records = [r for spec in cat.datasets for r in load_dataset(cat, spec).records]
+    assert {r.task for r in records} >= {"R2_1", "R2_2_A", "R2_2_B", "R2_3", "R3_1", "R3_2"}
+    args = []
+    for (model, share), agent in zip(OPEN_LOOP_MODELS.items(), R4_AGENTS, strict=True):
+        policy = OraclePolicy(
+            records,
+            answer=lambda rec, s=share: oracle_answer(rec) if _right(rec.id, s) else wrong_answer(rec),
+        )
+        run = tmp_path / model
+        with ScriptedOpenAIServer(policy) as url:
+            # The generated folder as it is: no --image-root (paths are relative to it).
+            argv = ["openloop", "predict", "--base-url", url, "--model", model, "--data-dir", str(generated),
+                    "--out", str(run), "--concurrency", "8", "--no-progress"]  # fmt: skip
+            assert main(argv) == 0
+        assert policy.unmatched == 0
+        assert main(["openloop", "score", str(run)]) == 0
+        args += [str(run), f"{model}={runs[f'r4_{agent}']}"]
+    capsys.readouterr()
+    out = tmp_path / "report"
+    assert main(["hierarchy", "report", *args, "--partial", "--out", str(out)]) == 0
+    data = json.loads((out / "hierarchy.json").read_text())
+    sharp, middling, poor = data["models"]
+    # The oracle answers every generated question right: full marks on every scored rank.
+    assert sharp["R1"] == sharp["R2"] == sharp["R3"] == sharp["S_open"] == 100.0
+    assert sharp["S_open"] > middling["S_open"] > poor["S_open"]
+    assert data["spearman_with_r4"]["S_open"]["rho"] == pytest.approx(0.5)
+    assert data["models"][0]["missing_tasks"] == ["R1_4"]

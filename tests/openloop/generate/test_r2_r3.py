@@ -144,7 +144,10 @@ def test_relations_follow_the_ego_frame_positions(records) -> None:
         f = rec["_frames"][0]
         by_id = {str(v.actor.id): v for v in f.visible}
         subj, ref = by_id[md["subject_instance_token"]], by_id[md["reference_instance_token"]]
-        assert list(subj.center_px) == md["subject_pixel"] and list(ref.center_px) == md["reference_pixel"]
+        for obj, key in ((subj, "subject_pixel"), (ref, "reference_pixel")):
+            u, v = md[key]  # inside the object's box and no other shown object's
+            assert obj.bbox[0] <= u <= obj.bbox[2] and obj.bbox[1] <= v <= obj.bbox[3]
+            assert r2.point_is_unique(f, obj, (u, v))
         assert max(subj.distance_m, ref.distance_m) <= r2.RELATION_MAX_DISTANCE_M
         fwd = md["subject_ego_xy"][0] - md["reference_ego_xy"][0]
         left = md["subject_ego_xy"][1] - md["reference_ego_xy"][1]

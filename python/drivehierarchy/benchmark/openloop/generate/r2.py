@@ -40,6 +40,7 @@ R2_2_A_QUESTION = (
     "the current frame), how many unique vehicles appear in CAM_FRONT?"
 )
 R2_2_B_FRAMES = 9  # t = 0 … 4.0 s at 2 Hz
+R2_2_B_MIN_FRAMES = 5  # … down to t = 2.0 s when the object leaves the view earlier
 R2_2_B_QUESTION = (
     "Focus on the {category} at pixel coordinates [{u}, {v}] in the initial frame (Image resolution: "
     "{w}x{h}), located in the {region} region. Observing the clip from t=0s to t={dur:.1f}s, how does "
@@ -110,6 +111,22 @@ def point_is_unique(frame: Frame, target: Visible, point: tuple[int, int]) -> bo
         if x0 <= u <= x1 and y0 <= v <= y1:
             return False
     return True
+
+
+# Where in its box an object is pointed at: the centre first, then inner points of the box (a
+# box is mostly the object's silhouette there), so a partly overlapped object can still be named.
+_POINT_FRACTIONS = ((0.5, 0.5), (0.3, 0.5), (0.7, 0.5), (0.5, 0.3), (0.5, 0.7), (0.3, 0.3), (0.7, 0.3),
+                    (0.3, 0.7), (0.7, 0.7))  # fmt: skip
+
+
+def unique_point(frame: Frame, target: Visible) -> tuple[int, int] | None:
+    """A pixel of `target`'s box that lies in no other shown actor's box, or None."""
+    x0, y0, x1, y1 = target.bbox
+    for fx, fy in _POINT_FRACTIONS:
+        point = (round(x0 + fx * (x1 - x0)), round(y0 + fy * (y1 - y0)))
+        if point_is_unique(frame, target, point):
+            return point
+    return None
 
 
 def _ambiguous_ids(frames: Iterable[Frame], categories: Sequence[str]) -> tuple[set[int], set[int]]:
@@ -299,23 +316,34 @@ def _state_at(m: Moment, step: int, actor_id: int, category: str) -> str | None:
 def build_r2_2_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str, Any]]:
     cands = []
     for m in moments:
-        clip = m.clip(R2_2_B_FRAMES, R2_2_A_STRIDE)
-        if clip is None:
+        full = m.clip(R2_2_B_FRAMES, R2_2_A_STRIDE)
+        if full is None:
             continue
-        first, last = clip[0], clip[-1]
-        ends = {v.actor.id for v in last.visible}
+        first = full[0]
         for target in first.visible:
             cat = target.actor.category
-            if cat not in STATES or target.actor.id not in ends:
+            if cat not in STATES:
                 continue
-            if not point_is_unique(first, target, target.center_px):
+            point = unique_point(first, target)
+            if point is None:
                 continue
-            # The state must hold over the first two and the last two frames (seen, not guessed).
-            start = {_state_at(m, f.step, target.actor.id, cat) for f in clip[:2]}
-            end = {_state_at(m, f.step, target.actor.id, cat) for f in clip[-2:]}
-            if len(start) != 1 or len(end) != 1 or None in start or None in end:
+            # The longest clip (4 s down to 2 s, as the original's varying durations) whose last
+            # frame still shows the object, with the state holding over the first two and the
+            # last two frames (seen, not guessed).
+            found = None
+            for k in range(R2_2_B_FRAMES, R2_2_B_MIN_FRAMES - 1, -1):
+                clip = full[:k]
+                if target.actor.id not in {v.actor.id for v in clip[-1].visible}:
+                    continue
+                start = {_state_at(m, f.step, target.actor.id, cat) for f in clip[:2]}
+                end = {_state_at(m, f.step, target.actor.id, cat) for f in clip[-2:]}
+                if len(start) == 1 and len(end) == 1 and None not in start and None not in end:
+                    found = (clip, start.pop(), end.pop())
+                    break
+            if found is None:
                 continue
-            s, e = start.pop(), end.pop()
+            clip, s, e = found
+            last = clip[-1]
             assert s is not None and e is not None
             answer = transition_text(s, e)
             states = STATES[cat]
@@ -331,7 +359,7 @@ def build_r2_2_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[
             ]
             others = sorted(pool)
             rng.shuffle(others)
-            u, v = target.center_px
+            u, v = point
             dur = last.t_s - first.t_s
             category = cat.lower()
             rec = {
@@ -414,14 +442,14 @@ def build_r2_3(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
         if f is None:
             continue
         objs = [
-            v
+            (v, p)
             for v in f.visible
-            if v.actor.category in RELATION_CATEGORIES
-            and v.distance_m <= RELATION_MAX_DISTANCE_M
-            and point_is_unique(f, v, v.center_px)
+            if v.actor.category in RELATION_CATEGORIES and v.distance_m <= RELATION_MAX_DISTANCE_M
+            for p in [unique_point(f, v)]
+            if p is not None
         ]
-        for subj in objs:
-            for ref in objs:
+        for subj, subj_px in objs:
+            for ref, ref_px in objs:
                 if subj.actor.id == ref.actor.id:
                     continue
                 sxy = ego_xy(m, subj.actor.x, subj.actor.y)
@@ -433,7 +461,7 @@ def build_r2_3(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
                 # both describe a car 15 m behind and one lane over.
                 others = [x for x in names if _sector_gap(x, rel) >= 90.0]
                 rng.shuffle(others)
-                (su, sv), (ru, rv) = subj.center_px, ref.center_px
+                (su, sv), (ru, rv) = subj_px, ref_px
                 rec = {
                     "scene_token": scene_token(m),
                     "sample_token": sample_token(m),
