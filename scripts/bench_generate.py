@@ -8,6 +8,7 @@ Target (issue 18): ≤ 180 s on a 2-core machine.
 from __future__ import annotations
 
 import argparse
+import resource
 import sys
 import tempfile
 import time
@@ -32,13 +33,19 @@ def main() -> int:
         t0 = time.perf_counter()
         summary = generate(args.suite, out, per_task=args.per_task, jobs=args.jobs)
         dt = time.perf_counter() - t0
+    cpu = sum(
+        getattr(resource.getrusage(who), f)
+        for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)
+        for f in ("ru_utime", "ru_stime")
+    )
     n = sum(t["records"] for t in summary["tasks"].values())
     for task, info in summary["tasks"].items():
         print(f"{task:8} {info['records']:5d}")
     moments = sum(e["moments"] for e in summary["episodes"])
     print(
         f"{n} records over {len(summary['tasks'])} tasks, {len(summary['episodes'])} rollouts, "
-        f"{moments} moments, {summary['images']} images in {dt:.1f} s (target {TARGET_S:.0f} s)"
+        f"{moments} moments, {summary['images']} images in {dt:.1f} s (target {TARGET_S:.0f} s); "
+        f"{cpu:.1f} CPU-s over all processes (wall time on an idle machine ≈ CPU-s / jobs)"
     )
     return 1 if args.strict_time and dt > TARGET_S else 0
 

@@ -195,3 +195,37 @@ def test_bad_options_name_the_option(tmp_path: Path) -> None:
         generate(SUITE, tmp_path / "out", per_task=0)
     with pytest.raises(ConfigError, match="--split"):
         plan_episodes(suite_files(SUITE), 1, 0, "test", ("expert",))
+
+
+def test_predict_and_score_through_the_loopback_server(generated, tmp_path: Path) -> None:
+    """`openloop predict --data-dir DIR` (no --image-root) then `openloop score`, end to end."""
+    from drivehierarchy.benchmark.openloop.report import extract_task_scores
+    from drivehierarchy.benchmark.openloop.runner import RunConfig, predict
+    from drivehierarchy.benchmark.openloop.synthetic import OraclePolicy
+    from drivehierarchy.testing.openai_server import ScriptedOpenAIServer
+
+    out, summary = generated
+    catalog = default_catalog(out)
+    records = [
+        r
+        for spec in select_datasets(catalog, list(summary["tasks"]))
+        for r in load_dataset(catalog, spec).records
+    ]
+    policy = OraclePolicy(records)
+    run = tmp_path / "run"
+    with ScriptedOpenAIServer(policy, latency_s=0.0) as url:
+        cfg = RunConfig(
+            base_url=url,
+            model="oracle",
+            out=run,
+            data_dir=out,
+            datasets=",".join(summary["tasks"]),
+            progress=False,
+        )
+        s = predict(cfg)
+    assert s.complete and s.failed == 0 and s.written == len(records) and policy.unmatched == 0
+    scores = extract_task_scores(score_run(run))
+    # R1_4 needs the learned judge (not installed in tests): listed as skipped, as today.
+    assert set(scores) == set(summary["tasks"]) - {"R1_4"}
+    for task, score in scores.items():
+        assert score == pytest.approx(100.0), task

@@ -337,13 +337,16 @@ class Moment:
 @dataclass(frozen=True)
 class Needs:
     """Frames a task builder reads: at the anchor (`cameras`), a FRONT clip of `clip` frames
-    `clip_stride` decisions apart from the anchor on, and `history` FRONT frames before it."""
+    `clip_stride` decisions apart from the anchor on, and `history` FRONT frames up to it."""
 
     cameras: tuple[str, ...] = (FRONT,)
     clip: int = 0
     clip_stride: int = 2
     history: int = 0
     history_stride: int = 2
+    # Candidate moments the builder needs per record asked (its rejection rate): costly frames
+    # are rendered at `oversample × per_task` anchors (front-only needs: at every anchor).
+    oversample: float = 1.5
 
 
 Builder = Callable[[Sequence[Moment], int, random.Random], list[dict[str, Any]]]
@@ -487,7 +490,7 @@ def rollout(
     *,
     shares: Sequence[float] | None = None,
     split: str = "eval",
-    spacing_s: float = 4.0,
+    spacing_s: float = 6.0,
     first_s: float = 2.0,
     max_s: float = 90.0,
     size: tuple[int, int] = IMAGE_SIZE,

@@ -24,18 +24,16 @@ from typing import Any
 from drivehierarchy import ConfigError
 
 from . import quality
-from .rollout import DRIVERS, IMAGE_SIZE, Frame, Moment, Needs, Rollout, builders, rollout
+from .rollout import DRIVERS, FRONT, IMAGE_SIZE, Frame, Moment, Needs, Rollout, builders, rollout
 
 SPLITS = ("eval", "train")
 # R4 plays seeds 0–4 (docs/suite.md); the train split never uses them.
 EVAL_SEEDS = (0, 1, 2, 3, 4)
 TRAIN_SEED_BASE = 100_000
-# Rollouts per record asked of each task (each rollout yields ~8 moments).
-ROLLOUTS_PER_RECORD = 0.25
-MOMENTS_PER_ROLLOUT = 8.0
-# Costly frames (clips, history, surround) are rendered at only as many anchors as give each
-# task this many times the records asked for (cheap front-only needs: at every anchor).
-OVERSAMPLE = 1.5
+# Rollouts per record asked of each task: 200 per task plays every scenario of the R4 suite
+# once (each rollout yields ~5.5 moments, one every 6 s from a seeded offset).
+ROLLOUTS_PER_RECORD = 0.5
+MOMENTS_PER_ROLLOUT = 5.5
 # Enough scenes for small sets (tests) to have an answer for every task.
 MIN_ROLLOUTS = 10
 
@@ -97,8 +95,13 @@ def _run(ep: Episode, needs: tuple[Needs, ...], shares: tuple[float, ...], split
 
 def need_shares(needs: tuple[Needs, ...], per_task: int, n_rollouts: int) -> tuple[float, ...]:
     """Share of anchors at which each need's frames are rendered."""
-    est = OVERSAMPLE * per_task / max(1.0, n_rollouts * MOMENTS_PER_ROLLOUT)
-    return tuple(1.0 if nd == Needs() else min(1.0, est) for nd in needs)
+    moments = max(1.0, n_rollouts * MOMENTS_PER_ROLLOUT)
+    return tuple(
+        1.0
+        if (nd.cameras, nd.clip, nd.history) == ((FRONT,), 0, 0)
+        else min(1.0, nd.oversample * per_task / moments)
+        for nd in needs
+    )
 
 
 def run_rollouts(
