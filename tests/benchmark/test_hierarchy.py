@@ -194,7 +194,7 @@ def generated(tmp_path_factory: pytest.TempPathFactory) -> Path:
         (root / "r4" / name).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(builtin_root() / "r4" / name, root / "r4" / name)
     out = root / "gen"
-    assert main(["openloop", "generate", "--suite", str(root / "r4"), "--out", str(out), "--per-task", "6",
+    assert main(["openloop", "generate", "--suite", str(root / "r4"), "--out", str(out), "--per-task", "10",
                  "--jobs", "1", "--no-progress"]) == 0  # fmt: skip
     return out
 

@@ -189,7 +189,8 @@ def _finish(recs: list[dict[str, Any]], id_fmt: str, orig_fmt: str, **fixed: str
 
 
 # -- R2_1 -----------------------------------------------------------------------------------------
-@register("R2_1", Needs(cameras=SURROUND))
+# About half the surround moments have a vehicle in the gray zone somewhere (no question).
+@register("R2_1", Needs(cameras=SURROUND, oversample=2.5))
 def build_r2_1(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str, Any]]:
     cands = []
     for m in moments:
@@ -244,7 +245,8 @@ def build_r2_1(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
 
 
 # -- R2_2_A ---------------------------------------------------------------------------------------
-@register("R2_2_A", Needs(clip=R2_2_A_FRAMES, clip_stride=R2_2_A_STRIDE))
+# Over 10 frames a vehicle in the gray zone is likelier than in one: more candidates needed.
+@register("R2_2_A", Needs(clip=R2_2_A_FRAMES, clip_stride=R2_2_A_STRIDE, oversample=2.5))
 def build_r2_2_a(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str, Any]]:
     cands = []
     for m in moments:
