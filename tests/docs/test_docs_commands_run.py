@@ -29,7 +29,7 @@ from typing import Any
 import pytest
 
 from drivehierarchy.benchmark.openloop.catalog import ImageRootMap, default_catalog, load_dataset
-from drivehierarchy.benchmark.openloop.synthetic import OraclePolicy, write_images
+from drivehierarchy.benchmark.openloop.synthetic import OraclePolicy, request_key, write_images
 from drivehierarchy.scenarios import builtin_root
 from drivehierarchy.testing.openai_server import ScriptedOpenAIServer, route_driver, route_points
 
@@ -60,6 +60,7 @@ SCALE: list[tuple[str, str]] = [
     ),
     (r"r4 gallery$", "r4 gallery --out gallery"),
     (r"--port \d+", "--port 0"),  # servers: any free port
+    (r"--per-task 200", "--per-task 5"),
 ]
 # Commands a page's commands build on, run first in the page's folder (argv after the program).
 GIVEN: dict[str, list[str | Callable[[Path], None]]] = {
@@ -97,6 +98,20 @@ GIVEN: dict[str, list[str | Callable[[Path], None]]] = {
         f"openloop predict --base-url {URL} --model m --data-dir Open_Loop_Evaluation"
         " --image-root /data/sets=DATASETS --out path/to/predictions",
     ],
+    # Three models' open-loop runs on the generated set and R4 runs (one short scenario each).
+    "docs/openloop-generate.md": [
+        "openloop generate --suite scenarios/r4 --out generated --per-task 200 --seed 0 --split eval",
+        lambda folder: _know_generated(folder / "generated"),
+        *(
+            c
+            for m in ("A", "B", "C")
+            for c in (
+                f"openloop predict --base-url {URL} --model {m} --out runs/{m} --data-dir generated",
+                f"openloop score runs/{m} --skip-l1-4",
+                f"r4 evaluate --agent vlm --base-url {URL} --model {m} --suite mini1 --out runs/{m}_r4",
+            )
+        ),
+    ],
     "docs/vlm.md": [
         f"r4 evaluate --agent vlm --base-url {URL} --model gemma-27b --suite mini --out runs/gemma27b",
         f"openloop predict --base-url {URL} --model qwen3-vl-8b --data-dir Open_Loop_Evaluation"
@@ -118,6 +133,18 @@ OSM = """<?xml version="1.0" encoding="UTF-8"?>
     <tag k="highway" v="residential"/></way>
 </osm>
 """
+
+
+# Ground truth of the sets `openloop generate` writes during the walk (the server answers them).
+GENERATED_ORACLES: list[OraclePolicy] = []
+
+
+def _know_generated(data: Path) -> None:
+    cat = default_catalog(data)
+    roots = ImageRootMap.parse([])
+    GENERATED_ORACLES.append(
+        OraclePolicy(r for ds in cat.datasets for r in load_dataset(cat, ds, roots).records)
+    )
 
 
 def _as_original(run: Path, dest: Path) -> None:
@@ -154,6 +181,7 @@ def _folder(base: Path, official: Path) -> Path:
     (base / "mini").mkdir()
     for name in MINI:
         _link(scen / "r4" / name, base / "mini" / name)
+    _link(scen / "r4" / MINI[0], base / "mini1" / MINI[0])
     _link(scen / "maps", base / "maps")  # the suite's files name their maps as ../../maps/...
     docs = base / "docs"
     docs.mkdir()
@@ -183,6 +211,9 @@ def server(official_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Iter
     oracle = OraclePolicy(records)
 
     wrong_share = {
+        "A": 0.1,
+        "B": 0.4,
+        "C": 0.7,
         "Qwen2.5-VL-7B": 0.2,
         "Qwen/Qwen3-VL-8B-Instruct": 0.3,
         "gemma-27b": 0.4,
@@ -195,9 +226,15 @@ def server(official_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Iter
         # Models differ (a reproducible share of wrong answers each), so rank correlations exist.
         model = str(req.body.get("model"))
         digest = hashlib.sha256(f"{model}|{req.last_text}".encode()).digest()
-        return "no idea" if digest[0] < 256 * wrong_share.get(model, 0.0) else oracle(req)
+        if digest[0] < 256 * wrong_share.get(model, 0.0):
+            return "no idea"
+        for known in (oracle, *GENERATED_ORACLES):
+            if known.by_key.get(request_key(req.user_texts, [img.sha256 for img in req.images])):
+                return known(req)
+        return "no idea"
 
-    models = ("Qwen2.5-VL-7B", "Qwen/Qwen3-VL-8B-Instruct", "qwen3-vl-8b", "gemma-27b", "internvl-8b", "m")
+    models = ("Qwen2.5-VL-7B", "Qwen/Qwen3-VL-8B-Instruct", "qwen3-vl-8b", "gemma-27b", "internvl-8b")
+    models += ("m", "M", "A", "B", "C")
     with ScriptedOpenAIServer(policy, models=models) as url:
         os.environ["DH_DOCS_TEST_URL"] = url
         yield images
