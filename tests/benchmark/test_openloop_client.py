@@ -92,6 +92,27 @@ def test_server_attempt_memory_is_bounded(monkeypatch: pytest.MonkeyPatch) -> No
         assert client.complete(oldest).text == "attempt 1"  # evicted: counted afresh
 
 
+def test_strict_server_gets_no_neutral_repetition_penalty() -> None:
+    # `transformers serve` refuses vLLM's extra field (HTTP 422 naming it). At the protocol's 1.0
+    # it is neutral, so the client leaves it out from then on; another value is a real setting.
+    seen: list[dict] = []
+
+    def strict(req):
+        seen.append(req.body)
+        if "repetition_penalty" in req.body:
+            return Fault.http(422, message="Unexpected fields in the request: {'repetition_penalty'}")
+        return "ok"
+
+    with ScriptedOpenAIServer(strict) as url:
+        client = _client(url)
+        assert client.complete(MSGS).text == "ok" and client.complete(MSGS).text == "ok"
+        assert ["repetition_penalty" in b for b in seen] == [True, False, False]
+        other = _client(url, decoding=DecodingConfig(repetition_penalty=1.1))
+        with pytest.raises(HttpStatusError) as err:
+            other.complete(MSGS)
+        assert err.value.status == 422 and "repetition_penalty" in str(err.value)
+
+
 def test_retries_exhausted_gives_typed_failure() -> None:
     with ScriptedOpenAIServer(lambda req: Fault.http(500)) as url, pytest.raises(HttpStatusError) as err:
         _client(url, max_retries=2).complete(MSGS)

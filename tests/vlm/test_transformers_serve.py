@@ -109,3 +109,34 @@ def test_harness_health_check_and_batch_abort_against_a_real_server(
     (line,) = [json.loads(x) for x in (tmp_path / "run" / "aborted.jsonl").read_text().splitlines()]
     assert line["vlm"]["transport_errors"] == 0 and line["vlm"]["decisions"] > 0
     assert line["vlm"]["parse_failures"] == line["vlm"]["decisions"]
+
+
+def test_generated_open_loop_set_end_to_end_against_a_real_server(
+    served: tuple[str, str], tmp_path: Path
+) -> None:
+    """Issue 18's chain on a real server: generate a small set from the suite, predict it with the
+    tiny model (no --image-root: the images are relative to the set), score it, and put it in the
+    hierarchy report beside an R4 run (paired by name)."""
+    from drivehierarchy.cli import main
+
+    url, model = served
+    data, run, r4 = tmp_path / "generated", tmp_path / "tiny", tmp_path / "tiny_r4"
+    suite = short_scenarios(1)[0]
+    assert main(["openloop", "generate", "--suite", str(suite.parent.parent), "--out", str(data),
+                 "--per-task", "1", "--no-progress"]) == 0  # fmt: skip
+    files = sorted(p.name for p in data.glob("*.jsonl"))
+    assert len(files) == 14
+    argv = ["openloop", "predict", "--base-url", url, "--model", model, "--data-dir", str(data)]
+    argv += ["--out", str(run), "--max-tokens", "8", "--concurrency", "4", "--no-progress"]
+    errors = run / "errors.jsonl"
+    assert main(argv) == 0, errors.read_text()[:3000] if errors.exists() else "no errors.jsonl"
+    lines = [json.loads(x) for p in (run / "predictions").glob("*.jsonl") for x in p.read_text().splitlines()]
+    assert len(lines) == 14 and all(isinstance(x["prediction"], str) for x in lines)
+    assert main(["openloop", "score", str(run), "--skip-l1-4"]) == 0
+    final = json.loads((run / "evaluation" / "final_score.json").read_text())
+    assert set(final["ranks"]) == {"R1", "R2", "R3"}
+    assert main(["r4", "evaluate", "--agent", "expert", "--suite", str(suite), "--out", str(r4)]) == 0
+    out = tmp_path / "report"
+    assert main(["hierarchy", "report", f"tiny={run}", f"tiny={r4}", "--partial", "--out", str(out)]) == 0
+    report = json.loads((out / "hierarchy.json").read_text())
+    assert [m["model"] for m in report["models"]] == ["tiny"]

@@ -48,10 +48,11 @@ class Fault:
     kind: str
     status: int = 500
     retry_after_s: float = 0.0
+    message: str = "injected fault"  # the error body's message (http)
 
     @classmethod
-    def http(cls, status: int = 500, retry_after_s: float = 0.0) -> Fault:
-        return cls("http", status, retry_after_s)
+    def http(cls, status: int = 500, retry_after_s: float = 0.0, message: str = "injected fault") -> Fault:
+        return cls("http", status, retry_after_s, message)
 
     @classmethod
     def malformed_json(cls) -> Fault:
@@ -434,9 +435,7 @@ def _make_handler(owner: ScriptedOpenAIServer) -> type[BaseHTTPRequestHandler]:
             if outcome.kind == "http":
                 headers_retry = outcome.status == 429
                 self.send_response(outcome.status)
-                payload = json.dumps(
-                    {"error": {"message": "injected fault", "code": outcome.status}}
-                ).encode()
+                payload = json.dumps({"error": {"message": outcome.message, "code": outcome.status}}).encode()
                 self.send_header("Content-Type", "application/json")
                 self.send_header("Content-Length", str(len(payload)))
                 if headers_retry:

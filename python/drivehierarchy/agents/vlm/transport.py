@@ -133,6 +133,7 @@ class AsyncChatTransport:
         self.base_url = check_base_url(base_url)
         self.model = model
         self.decoding = decoding or DecodingConfig()
+        self._omit_repetition_penalty = False
         self.timeout_s = timeout_s
         self.max_retries = max_retries
         self.backoff_s = backoff_s
@@ -153,7 +154,22 @@ class AsyncChatTransport:
 
     def payload(self, messages: list[dict[str, Any]]) -> dict[str, Any]:
         """The request body this transport sends for `messages`."""
-        return {"model": self.model, "messages": messages, **self.decoding.payload()}
+        body = {"model": self.model, "messages": messages, **self.decoding.payload()}
+        if self._omit_repetition_penalty:
+            body.pop("repetition_penalty", None)
+        return body
+
+    def _server_rejects_neutral_penalty(self, status: int, text: str) -> bool:
+        """A strict server (`transformers serve`) refuses vLLM's `repetition_penalty` field. At the
+        protocol's 1.0 the field changes nothing, so it is left out from then on instead of
+        failing every request; any other value is a real setting and the error stands."""
+        # Requests already in flight when the first refusal came back retry too.
+        if status not in (400, 422) or "repetition_penalty" not in text:
+            return False
+        if self.decoding.repetition_penalty != 1.0:
+            return False
+        self._omit_repetition_penalty = True
+        return True
 
     async def complete(self, messages: list[dict[str, Any]]) -> Completion:
         start = time.monotonic()
@@ -176,6 +192,8 @@ class AsyncChatTransport:
                 status = exc.status_code
                 snippet = exc.response.text[:300] if exc.response is not None else str(exc)
                 last = HttpStatusError(f"HTTP {status}: {snippet}", status=status, attempts=attempt)
+                if self._server_rejects_neutral_penalty(status, snippet):
+                    continue
                 if status != 429 and status < 500:
                     raise last from None
                 try:
