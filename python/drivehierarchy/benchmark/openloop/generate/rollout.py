@@ -490,7 +490,7 @@ def rollout(
     *,
     shares: Sequence[float] | None = None,
     split: str = "eval",
-    spacing_s: float = 6.0,
+    spacing_s: float = 4.5,
     first_s: float = 2.0,
     max_s: float = 90.0,
     size: tuple[int, int] = IMAGE_SIZE,

@@ -33,9 +33,9 @@ SPLITS = ("eval", "train")
 EVAL_SEEDS = (0, 1, 2, 3, 4)
 TRAIN_SEED_BASE = 100_000
 # Rollouts per record asked of each task: 200 per task plays every scenario of the R4 suite
-# once (each rollout yields ~5.5 moments, one every 6 s from a seeded offset).
+# once (each rollout yields ~7.5 moments, one every 4.5 s from a seeded offset).
 ROLLOUTS_PER_RECORD = 0.5
-MOMENTS_PER_ROLLOUT = 5.5
+MOMENTS_PER_ROLLOUT = 7.5
 # Enough scenes for small sets (tests) to have an answer for every task.
 MIN_ROLLOUTS = 10
 # Anchors with costly frames beyond `oversample × per_task` (small sets vary the most).
