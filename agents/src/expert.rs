@@ -884,7 +884,7 @@ impl Expert {
             let moving = a.speed_mps.abs() > 0.2;
             let is_vehicle = !a.kind.is_static() && a.kind != ActorKind::Pedestrian;
             let fwd = Vec2::from_angle(a.pose.yaw);
-            let behind = is_vehicle && moving && self.from_behind(route, a, s_lo, s_hi, s_front);
+            let behind = is_vehicle && moving && self.coming_up_behind(route, a, s_lo, s_hi, s_front);
             let last = if moving { steps } else { 0 };
             for k in 0..=last {
                 let t = k as f64 * p.prediction_step_s;
@@ -1011,7 +1011,7 @@ impl Expert {
     }
 
     /// A vehicle driving our way whose centre is behind our front.
-    fn from_behind(&self, route: &Polyline, a: &ActorView, s_lo: f64, s_hi: f64, s_front: f64) -> bool {
+    fn coming_up_behind(&self, route: &Polyline, a: &ActorView, s_lo: f64, s_hi: f64, s_front: f64) -> bool {
         a.speed_mps > 0.0
             && project_window(route, a.pose.pos, s_lo, s_hi).is_some_and(|pr| {
                 pr.s < s_front && wrap_angle(a.pose.yaw - route_heading(route, pr.s)).abs() < 0.8
