@@ -51,6 +51,21 @@ if [ -n "$missing" ]; then
         exit 1
     fi
 fi
+# The editor's browser tests (tests/editor/test_e2e.py, the dev extra) drive Debian's chromium
+# through Playwright: the system browser, no download.
+case ",$extras," in
+*,dev,* | *,all,*)
+    if ! command -v chromium >/dev/null; then
+        if [ "$(id -u)" -eq 0 ] && command -v apt-get >/dev/null; then
+            echo "install: installing chromium for the editor's browser tests"
+            apt-get update -qq
+            DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium
+        else
+            echo "install: the editor's browser tests need chromium: sudo apt-get install chromium" >&2
+        fi
+    fi
+    ;;
+esac
 spec="."
 [ -n "$extras" ] && spec=".[$extras]"
 env -u SUMO_HOME "$VPY" -m pip install --quiet -e "$spec"

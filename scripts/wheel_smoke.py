@@ -94,6 +94,17 @@ def main() -> None:
     summary = json.loads((runs / "summary.json").read_text())
     check(summary["completed"] == 10 and not summary["failed"], "10 scenarios evaluated, none failed")
 
+    # The editor's page ships in the wheel (no CDN): served from the installed package.
+    from starlette.testclient import TestClient
+
+    from drivehierarchy.editor import create_app
+
+    with TestClient(create_app(work, precompute=False), base_url="http://127.0.0.1:8765") as client:
+        assets = (("/", "<canvas"), ("/static/editor.js", "window.editor"), ("/static/editor.css", "{"))
+        for url, marker in assets:
+            r = client.get(url)
+            check(r.status_code == 200 and marker in r.text, f"the editor serves {url} from the wheel")
+
     if official is None or not official.is_dir():
         print("wheel smoke: open-loop samples not given; skipping openloop score")
         return

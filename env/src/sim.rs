@@ -598,6 +598,19 @@ impl Sim {
         crate::render::project_actors(&map, &frame, cfg)
     }
 
+    /// [`Sim::render_camera`] and [`Sim::project_actors`] from one raster pass.
+    pub fn render_and_project(
+        &self,
+        cfg: &CameraConfig,
+        out: &mut Image,
+    ) -> Result<Vec<crate::render::ProjectedActor>> {
+        let ep = self.episode.as_ref().ok_or_else(not_started)?;
+        let map = self.render_map_or_build();
+        let route_pts = self.route_points_world(&ep.world.ego().pose);
+        let frame = frame_input(&ep.world, &route_pts);
+        crate::render::render_and_project(&map, &frame, cfg, out)
+    }
+
     fn render_map_or_build(&self) -> Arc<RenderMap> {
         self.render_map.get_or_init(|| Arc::new(RenderMap::build(&self.scenario.map))).clone()
     }

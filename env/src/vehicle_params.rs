@@ -8,24 +8,35 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct VehicleParams {
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub length_m: f64,
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub width_m: f64,
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub height_m: f64,
     /// Front-to-rear axle distance L.
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub wheelbase_m: f64,
     /// Rear axle to the reference point (vehicle centre), l_r.
+    #[schemars(range(min = 0))]
     pub rear_axle_to_center_m: f64,
     /// Road-wheel angle at |steer| = 1.
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub max_steer_deg: f64,
     /// Full-throttle acceleration at standstill, m/s² (fades linearly to 0 at `max_speed_mps`).
+    #[schemars(range(min = 0))]
     pub max_accel_mps2: f64,
     /// Full-brake deceleration, m/s².
+    #[schemars(range(min = 0))]
     pub max_brake_mps2: f64,
     /// Constant rolling deceleration while moving, m/s².
+    #[schemars(range(min = 0))]
     pub rolling_decel_mps2: f64,
     /// Aerodynamic drag coefficient: decel = drag · v², 1/m.
+    #[schemars(range(min = 0))]
     pub drag_per_m: f64,
     /// Speed cap; speeds are clamped to [0, max] (no reverse).
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub max_speed_mps: f64,
 }
 

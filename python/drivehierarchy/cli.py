@@ -14,8 +14,10 @@ _AREAS = (
     "drivehierarchy.baselines.cli",
     "drivehierarchy.benchmark.openloop.cli",
     "drivehierarchy.benchmark.r4.cli",
+    "drivehierarchy.benchmark.hierarchy",
     "drivehierarchy.scenario_cli",
     "drivehierarchy.map_cli",
+    "drivehierarchy.editor.cli",
 )
 
 

@@ -43,10 +43,20 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     sh.add_argument("--json", action="store_true")
     sh.set_defaults(func=_show)
 
-    pv = cmds.add_parser("preview", help="write the start state's front camera and BEV as PNGs")
+    pv = cmds.add_parser(
+        "preview",
+        help="write the front camera and BEV as PNGs (the start state, or at --time)",
+        description=(
+            "Writes OUT/<category>__<name>_front.png (800×450, 2× supersampled) and _bev.png "
+            "(800×800). Without --time: the start state after reset. With --time T: the scene at "
+            "the last decision at or before T seconds, the ego driven by the expert (what the "
+            "editor's preview shows, byte for byte)."
+        ),
+    )
     pv.add_argument("scenario", help="scenario file or built-in id")
     pv.add_argument("--out", type=Path, default=Path("."), help="output folder (default: .)")
     pv.add_argument("--seed", type=int, default=0)
+    pv.add_argument("--time", type=float, metavar="T", help="seconds into the episode (expert driving)")
     pv.set_defaults(func=_preview)
 
     pr = cmds.add_parser(
@@ -275,6 +285,18 @@ def _preview(args: argparse.Namespace) -> int:
 
     path = Path(resolve_scenario(args.scenario))
     args.out.mkdir(parents=True, exist_ok=True)
+    if args.time is not None:
+        from drivehierarchy.benchmark.r4.gallery import scenario_key
+        from drivehierarchy.editor.scene import preview_frames
+
+        if not args.time >= 0:
+            raise ConfigError(f"--time {args.time}: must be a number of seconds ≥ 0")
+        pngs = preview_frames(str(path), args.time, seed=args.seed)
+        for view, data in pngs.items():
+            out = args.out / f"{scenario_key(path)}_{view}.png"
+            out.write_bytes(data)
+            print(out)
+        return 0
     entry = render_start(path, args.out, seed=args.seed)
     for view in ("front", "bev"):
         print(args.out / entry.files[view])

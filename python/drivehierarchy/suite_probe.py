@@ -53,11 +53,6 @@ SWEEP: tuple[str, ...] = (
 )
 # Categories whose only hazard is a traffic light (the light-obeying driver may score there).
 LIGHT_ONLY_CATEGORIES: frozenset[str] = frozenset()
-# Categories still being retuned: the per-category limits on the blind drivers are reported for
-# them but not required (the suite test requires them to still fail, so the entry is removed as
-# soon as the category is fixed). 07: its leads brake on the clock or at a place, so a blind
-# driver slower than the lead never reaches it; the fix needs leads paced to the ego.
-PENDING_CATEGORIES: frozenset[str] = frozenset({"07_sudden_brake"})
 RESULT_FIELDS = (
     "category",
     "id",
@@ -341,13 +336,10 @@ def summarize(rows: list[dict[str, Any]]) -> Summary:
     return Summary(cats, cells, counts, seeds, table, overall, completed, dict(per_scenario), cat_of)
 
 
-def must_holds(s: Summary, pending: Iterable[str] = PENDING_CATEGORIES) -> list[tuple[str, bool, str]]:
-    """The suite's discrimination requirements (docs/suite.md), each with what was measured.
-
-    The per-category limits on the blind drivers skip the `pending` categories."""
+def must_holds(s: Summary) -> list[tuple[str, bool, str]]:
+    """The suite's discrimination requirements (docs/suite.md), each with what was measured."""
     out: list[tuple[str, bool, str]] = []
-    skip = set(pending)
-    cats_checked = [c for c in s.categories if c not in skip]
+    cats_checked = s.categories
 
     def high(cells: list[str], limit: float, cats: Iterable[str]) -> dict[str, str]:
         return {
@@ -463,11 +455,6 @@ def markdown(s: Summary) -> str:
     out.append("")
     for name, ok, detail in must_holds(s):
         out.append(f"- {'✅' if ok else '❌'} {name}" + ("" if ok else f" — measured {detail}"))
-    for name, ok, detail in must_holds(s, pending=()):
-        if not ok:
-            out.append(
-                f"- ⏳ not yet, in {', '.join(sorted(PENDING_CATEGORIES))}: {name} — measured {detail}"
-            )
     out.append("")
     # Per scenario, for the authors.
     out.append("| scenario | " + " | ".join(label[c] for c in cols) + " |")

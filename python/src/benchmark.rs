@@ -236,21 +236,38 @@ fn openloop_frozen_weights() -> BTreeMap<&'static str, f64> {
     TASKS.iter().map(|t| (t.name, t.weight)).collect()
 }
 
-/// Calibrates task weights from `scores[model][task]` (tasks in `tasks` order). Returns a
-/// dict: tasks, weights {task: w}, rho, load, uniqueness.
+/// The calibration's defaults (PROTOCOL §1.4): λ_same, λ_cross, γ and the rank budgets.
 #[pyfunction]
-#[pyo3(signature = (tasks, scores, lambda_same = 1.0, lambda_cross = 0.35, gamma = 2.0, budgets = None))]
+fn openloop_calibration_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+    let p = CalibrationParams::default();
+    let d = PyDict::new(py);
+    d.set_item("lambda_same", p.lambda_same)?;
+    d.set_item("lambda_cross", p.lambda_cross)?;
+    d.set_item("gamma", p.gamma)?;
+    let budgets: BTreeMap<&str, f64> = p.budgets.iter().map(|(r, b)| (r.as_str(), *b)).collect();
+    d.set_item("budgets", budgets)?;
+    Ok(d)
+}
+
+/// Calibrates task weights from `scores[model][task]` (tasks in `tasks` order); a parameter
+/// left as None takes its default (`openloop_calibration_defaults`). Returns a dict: tasks,
+/// weights {task: w}, rho, load, uniqueness.
+#[pyfunction]
+#[pyo3(signature = (tasks, scores, lambda_same = None, lambda_cross = None, gamma = None, budgets = None))]
 fn openloop_calibrate<'py>(
     py: Python<'py>,
     tasks: Vec<String>,
     scores: Vec<Vec<f64>>,
-    lambda_same: f64,
-    lambda_cross: f64,
-    gamma: f64,
+    lambda_same: Option<f64>,
+    lambda_cross: Option<f64>,
+    gamma: Option<f64>,
     budgets: Option<BTreeMap<String, f64>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let ids = tasks.iter().map(|t| task_of(py, t)).collect::<PyResult<Vec<_>>>()?;
-    let mut params = CalibrationParams { lambda_same, lambda_cross, gamma, ..CalibrationParams::default() };
+    let mut params = CalibrationParams::default();
+    params.lambda_same = lambda_same.unwrap_or(params.lambda_same);
+    params.lambda_cross = lambda_cross.unwrap_or(params.lambda_cross);
+    params.gamma = gamma.unwrap_or(params.gamma);
     if let Some(b) = budgets {
         params.budgets = b
             .into_iter()
@@ -289,6 +306,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(openloop_frozen_weights, m)?)?;
     m.add_function(wrap_pyfunction!(openloop_score_params, m)?)?;
     m.add_function(wrap_pyfunction!(openloop_calibrate, m)?)?;
+    m.add_function(wrap_pyfunction!(openloop_calibration_defaults, m)?)?;
     m.add_function(wrap_pyfunction!(openloop_spearman, m)?)?;
     m.add("OPENLOOP_UNICODE_VERSION", dh_benchmark::pyunicode::UNICODE_VERSION)?;
     Ok(())

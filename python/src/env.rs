@@ -17,12 +17,12 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock};
 
 /// Networks parsed once per process, shared by every env on the same map.
-fn map_cache() -> Arc<MapCache> {
+pub(crate) fn map_cache() -> Arc<MapCache> {
     static CACHE: OnceLock<Arc<MapCache>> = OnceLock::new();
     CACHE.get_or_init(|| Arc::new(MapCache::new())).clone()
 }
 
-fn err(py: Python<'_>, e: dh_env::Error) -> PyErr {
+pub(crate) fn err(py: Python<'_>, e: dh_env::Error) -> PyErr {
     to_pyerr(py, e)
 }
 
@@ -37,12 +37,25 @@ pub struct PySim {
 #[pymethods]
 impl PySim {
     #[new]
-    #[pyo3(signature = (scenario, config_json, sumo_home=None))]
-    fn new(py: Python<'_>, scenario: &str, config_json: &str, sumo_home: Option<PathBuf>) -> PyResult<Self> {
+    /// `text`: the scenario's TOML standing for the file at `scenario` (an editor's unsaved
+    /// buffer; relative paths and error messages still refer to `scenario`).
+    #[pyo3(signature = (scenario, config_json, sumo_home=None, text=None))]
+    fn new(
+        py: Python<'_>,
+        scenario: &str,
+        config_json: &str,
+        sumo_home: Option<PathBuf>,
+        text: Option<&str>,
+    ) -> PyResult<Self> {
         let config = SimConfig::from_json(config_json).map_err(|e| err(py, e))?;
         let load = LoadOptions { sumo_home, cache: Some(map_cache()) };
         let path = Path::new(scenario).to_path_buf();
-        let inner = py.detach(|| Sim::new(&path, config, &load)).map_err(|e| err(py, e))?;
+        let inner = py
+            .detach(|| match text {
+                None => Sim::new(&path, config, &load),
+                Some(t) => Sim::from_scenario(crate::editor::resolve_text(&path, t, &load)?, config),
+            })
+            .map_err(|e| err(py, e))?;
         let expert = Expert::new(ExpertParams::default()).map_err(|e| err(py, e))?;
         Ok(PySim { inner, expert, expert_bridge: ActuationBridge::new() })
     }
@@ -220,18 +233,21 @@ impl PySim {
         cam.validate().map_err(|e| err(py, e))?;
         let inner = &self.inner;
         let found = py.detach(|| inner.project_actors(&cam)).map_err(|e| err(py, e))?;
-        let out = PyList::empty(py);
-        for a in found {
-            let d = PyDict::new(py);
-            d.set_item("id", a.id)?;
-            d.set_item("bbox_px", a.bbox_px.to_vec())?;
-            d.set_item("center_px", a.center_px.to_vec())?;
-            d.set_item("distance_m", a.distance_m)?;
-            d.set_item("visible_fraction", a.visible_fraction)?;
-            d.set_item("pixel_count", a.pixel_count)?;
-            out.append(d)?;
-        }
-        Ok(out)
+        projected_to_py(py, found)
+    }
+
+    /// `(render_camera(cfg), project_actors(cfg))` from one raster pass (same values).
+    fn render_and_project<'py>(
+        &self,
+        py: Python<'py>,
+        config_json: &str,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyList>)> {
+        let cam: CameraConfig = parse_json(py, "camera", config_json)?;
+        cam.validate().map_err(|e| err(py, e))?;
+        let mut img = Image::default();
+        let inner = &self.inner;
+        let found = py.detach(|| inner.render_and_project(&cam, &mut img)).map_err(|e| err(py, e))?;
+        Ok((image_to_py(py, img)?, projected_to_py(py, found)?))
     }
 
     /// The scene score record so far (final once terminated), as a dict.
@@ -334,6 +350,40 @@ impl PySim {
         Ok(arr.into_pyarray(py))
     }
 
+    /// Active actors (ego excluded, sorted by id) with what `actors_array` leaves out: one dict
+    /// each of id, kind, x, y, yaw, speed_mps, length_m, width_m, height_m, color (sRGB),
+    /// braking, blinkers, motion (`static`/`scripted`/`external`/`traffic`).
+    fn actor_views<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        let world = self.inner.world().map_err(|e| err(py, e))?;
+        let out = PyList::empty(py);
+        for a in world.actors() {
+            let d = PyDict::new(py);
+            let kind = serde_json::to_value(a.kind)
+                .map_err(|e| err(py, dh_env::Error::Simulation(e.to_string())))?;
+            d.set_item("id", a.id)?;
+            d.set_item("kind", kind.as_str().unwrap_or_default())?;
+            d.set_item("x", a.pose.pos.x)?;
+            d.set_item("y", a.pose.pos.y)?;
+            d.set_item("yaw", a.pose.yaw)?;
+            d.set_item("speed_mps", a.speed_mps)?;
+            d.set_item("length_m", a.length_m)?;
+            d.set_item("width_m", a.width_m)?;
+            d.set_item("height_m", a.height_m)?;
+            d.set_item("color", a.color.map(u32::from).to_vec())?;
+            d.set_item("braking", a.braking)?;
+            d.set_item("blinkers", a.blinkers)?;
+            d.set_item("motion", world.actor_motion(a.id).unwrap_or("unknown"))?;
+            out.append(d)?;
+        }
+        Ok(out)
+    }
+
+    /// Simulated time of the running episode, seconds.
+    #[getter]
+    fn time_s(&self, py: Python<'_>) -> PyResult<f64> {
+        Ok(self.inner.world().map_err(|e| err(py, e))?.time_s())
+    }
+
     /// The ego as `[x, y, yaw, speed_mps, length_m, width_m]`.
     fn ego_array<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let world = self.inner.world().map_err(|e| err(py, e))?;
@@ -353,6 +403,25 @@ impl PySim {
             .map(|l| (l.tl_id.clone(), l.lane_id.clone(), format!("{:?}", l.color).to_lowercase()))
             .collect())
     }
+}
+
+fn projected_to_py<'py>(
+    py: Python<'py>,
+    found: Vec<dh_env::render::ProjectedActor>,
+) -> PyResult<Bound<'py, PyList>> {
+    let out = PyList::empty(py);
+
+    for a in found {
+        let d = PyDict::new(py);
+        d.set_item("id", a.id)?;
+        d.set_item("bbox_px", a.bbox_px.to_vec())?;
+        d.set_item("center_px", a.center_px.to_vec())?;
+        d.set_item("distance_m", a.distance_m)?;
+        d.set_item("visible_fraction", a.visible_fraction)?;
+        d.set_item("pixel_count", a.pixel_count)?;
+        out.append(d)?;
+    }
+    Ok(out)
 }
 
 fn parse_json<T: serde::de::DeserializeOwned>(py: Python<'_>, field: &str, text: &str) -> PyResult<T> {

@@ -3,6 +3,7 @@
 use pyo3::prelude::*;
 
 mod benchmark;
+mod editor;
 mod env;
 mod errors;
 mod json;
@@ -14,6 +15,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     errors::register(m)?;
     env::register(m)?;
+    editor::register(m)?;
     benchmark::register(m)?;
     Ok(())
 }

@@ -228,10 +228,21 @@ def test_sumo_scenarios_share_the_process_simulation_or_get_a_process_each() -> 
     assert b.current.traffic_mode == "sumo" and np.isfinite(obs["state"]).all()
     a.close()
     b.close()
-    # In-process vectorisation cannot hold two SUMO simulations: a clear error, not a crash.
     assert sumo_scenarios([str(flow), str(brake)], WrapperConfig()) == [str(flow)]
-    with pytest.raises(ConfigError, match=r"06_traffic_flow.*--vec subproc"):
-        make_vec_env([flow, brake], WrapperConfig(), 2, vec="dummy")
+    # In-process vectorisation (SB3's DummyVecEnv) runs two SUMO simulations at once: the
+    # second env's on TraCI.
+    venv = make_vec_env([flow], WrapperConfig(), 2, vec="dummy")
+    try:
+        obs = venv.reset()
+        envs = [e.unwrapped for e in venv.envs]
+        assert all(e.current.traffic_mode == "sumo" for e in envs)
+        transports = sorted(e.current.unwrapped._sumo.transport for e in envs)
+        assert len(transports) == 2 and "traci" in transports, transports
+        for _ in range(20):
+            obs, rew, _, _ = venv.step(np.zeros((2, 2), np.float32))
+        assert np.all(np.isfinite(obs)) and rew.shape == (2,)
+    finally:
+        venv.close()
     venv = make_vec_env([flow, brake], WrapperConfig(traffic="native"), 2, vec="dummy")
     venv.reset()
     venv.close()

@@ -52,6 +52,28 @@ def test_subset_without_r1_4() -> None:
     assert "R1_4" not in w and sum(w.values()) == pytest.approx(1.0)
 
 
+def test_reads_the_open_loop_reports_table1(tmp_path: Path) -> None:
+    # `openloop report` writes avg_score and rank columns beside the tasks, and `–` for R1_4 when
+    # no judge scored it: calibration takes the tasks and leaves the unscored one out.
+    from drivehierarchy.benchmark.openloop.report import write_table1_csv
+
+    models, tasks, matrix = read_scores_csv(TABLE1)
+    rows = []
+    for m, vals in zip(models, matrix, strict=True):
+        row = dict(zip(tasks, vals, strict=True), model=m, avg=50.0, R1=1.0, R2=2.0, R3=3.0)
+        row["R1_4"] = None
+        rows.append(row)
+    out = tmp_path / "table1.csv"
+    write_table1_csv(rows, out)
+    assert "avg_score" in out.read_text(encoding="utf-8") and "–" in out.read_text(encoding="utf-8")
+    table = read_scores_csv(out)
+    assert table.models == models and "R1_4" not in table.tasks and len(table.tasks) == 13
+    partly = out.read_text(encoding="utf-8").replace("–", "12.5", 1)
+    (tmp_path / "partly.csv").write_text(partly, encoding="utf-8")
+    with pytest.raises(ConfigError, match="column `R1_4`: `–` is not a number"):
+        read_scores_csv(tmp_path / "partly.csv")
+
+
 @pytest.mark.parametrize(
     ("text", "match"),
     [

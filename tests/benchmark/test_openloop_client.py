@@ -74,6 +74,24 @@ def test_500_and_429_are_retried() -> None:
         assert _client(url).complete(MSGS).attempts == 3
 
 
+def test_server_attempt_memory_is_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
+    # A soak sends millions of distinct requests: the retry memory keeps only the newest bodies.
+    from drivehierarchy.testing import openai_server
+
+    monkeypatch.setattr(openai_server, "ATTEMPTS_KEPT", 8)
+    server = ScriptedOpenAIServer(lambda req: f"attempt {req.attempt}")
+    with server as url:
+        client = _client(url)
+        for i in range(20):
+            msgs = [MSGS[0], {"role": "user", "content": [{"type": "text", "text": f"q{i}"}]}]
+            assert client.complete(msgs).text == "attempt 1"
+        assert len(server._attempts) == 8
+        recent = [MSGS[0], {"role": "user", "content": [{"type": "text", "text": "q19"}]}]
+        assert client.complete(recent).text == "attempt 2"  # a repeat of a recent body still counts
+        oldest = [MSGS[0], {"role": "user", "content": [{"type": "text", "text": "q0"}]}]
+        assert client.complete(oldest).text == "attempt 1"  # evicted: counted afresh
+
+
 def test_retries_exhausted_gives_typed_failure() -> None:
     with ScriptedOpenAIServer(lambda req: Fault.http(500)) as url, pytest.raises(HttpStatusError) as err:
         _client(url, max_retries=2).complete(MSGS)

@@ -167,8 +167,11 @@ def test_batch_scoring_contract_and_errors(tmp_path: Path) -> None:
         _core.openloop_score_task("R1_3", ['{"task_id": "x"}'], ["[1,2,3,4]"])
     with pytest.raises(ConfigError, match="unknown open-loop task"):
         _core.openloop_score_task("R9", [], [])
-    with pytest.raises(ConfigError, match="not a results folder"):
+    with pytest.raises(ConfigError, match="nowhere: no such folder"):
         score_run(tmp_path / "nowhere")
+    (tmp_path / "a_file").write_text("x", encoding="utf-8")
+    with pytest.raises(ConfigError, match="not a results folder"):
+        score_run(tmp_path / "a_file")
     with pytest.raises(ConfigError, match="no prediction files"):
         score_run(tmp_path)
     # A record lacking its ground truth is skipped; a file with nothing else fails the run,

@@ -562,6 +562,29 @@ impl Renderer {
     }
 }
 
+impl Renderer {
+    /// [`Renderer::project_actors`] plus the camera image from the same raster pass (the id
+    /// pass draws colour too), so a caller needing both renders the scene once. With
+    /// supersampling the image is rendered separately (the id pass runs at 1×).
+    pub fn render_and_project(
+        &mut self,
+        map: &RenderMap,
+        frame: &FrameInput,
+        cfg: &CameraConfig,
+        out: &mut Image,
+    ) -> Result<Vec<ProjectedActor>> {
+        let found = self.project_actors(map, frame, cfg)?;
+        if cfg.supersample == 1 {
+            out.resize(cfg.width, cfg.height);
+            let n = out.data.len();
+            out.data.copy_from_slice(&self.ss[..n]);
+        } else {
+            self.render_camera(map, frame, cfg, out)?;
+        }
+        Ok(found)
+    }
+}
+
 #[inline(always)]
 fn draw_tri3<B: RasterBackend>(cam: &Cam, b: &mut B, tr: &Tri3, poly: &mut [SV; 4]) {
     let p0 = tr.p[0];

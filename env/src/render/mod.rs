@@ -56,6 +56,16 @@ pub fn render_bev(map: &RenderMap, frame: &FrameInput, cfg: &BevConfig, out: &mu
     with_renderer(|r| r.render_bev(map, frame, cfg, out))
 }
 
+/// [`project_actors`] and the camera image from one raster pass.
+pub fn render_and_project(
+    map: &RenderMap,
+    frame: &FrameInput,
+    cfg: &CameraConfig,
+    out: &mut Image,
+) -> Result<Vec<ProjectedActor>> {
+    with_renderer(|r| r.render_and_project(map, frame, cfg, out))
+}
+
 /// Every actor the camera sees, with its pixel box, centre, distance and visible fraction.
 pub fn project_actors(
     map: &RenderMap,

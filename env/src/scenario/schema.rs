@@ -26,10 +26,12 @@ pub struct ScenarioFile {
     pub map: String,
     /// T_ref: the ego's reference duration (efficiency term only).
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub reference_duration_s: Option<f64>,
     /// The scenario duration: the longest estimated duration over all actors, ego included.
     /// The scenario timeout is 2 × it. Default: see `ResolvedScenario::scenario_duration_s`.
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub duration_s: Option<f64>,
     #[serde(default)]
     pub seed: u64,
@@ -61,6 +63,7 @@ pub struct PlaceSpec {
     #[serde(default)]
     pub lane: Option<String>,
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub s: Option<f64>,
     #[serde(default)]
     pub offset_m: Option<f64>,
@@ -84,6 +87,7 @@ pub struct EgoSpec {
     #[serde(default)]
     pub route_edges: Option<Vec<String>>,
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub speed_mps: f64,
     #[serde(default)]
     pub color: Option<[u8; 3]>,
@@ -100,10 +104,13 @@ pub struct ObstacleSpec {
     pub kind: ActorKind,
     pub at: PlaceSpec,
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub length_m: Option<f64>,
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub width_m: Option<f64>,
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub height_m: Option<f64>,
     #[serde(default)]
     pub color: Option<[u8; 3]>,
@@ -137,6 +144,7 @@ pub struct WaypointSpec {
     #[serde(default)]
     pub lane: Option<String>,
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub s: Option<f64>,
     #[serde(default)]
     pub offset_m: Option<f64>,
@@ -145,6 +153,7 @@ pub struct WaypointSpec {
     #[serde(default)]
     pub y: Option<f64>,
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub speed_mps: Option<f64>,
 }
 
@@ -162,8 +171,10 @@ pub struct RouteSpec {
     #[serde(default)]
     pub start_lane: Option<String>,
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub start_s: Option<f64>,
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub end_s: Option<f64>,
     /// Lateral shift of the whole path, > 0 = left.
     #[serde(default)]
@@ -187,20 +198,24 @@ pub enum OfSpec {
 #[schemars(transform = crate::scenario::schema_rules::trigger_alternatives)]
 pub struct TriggerSpec {
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub time_s: Option<f64>,
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub ego_within_m: Option<f64>,
     #[serde(default)]
     pub of: Option<OfSpec>,
     /// Time-to-conflict trigger: fires when the ego is expected to reach the projection of `of`
     /// on its route within this many seconds (route distance ÷ max(ego speed, 0.5 m/s)).
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub ego_eta_s: Option<f64>,
     /// Chained trigger: name of the actor whose `event` this one follows.
     #[serde(default)]
     pub after: Option<String>,
     /// Chained trigger: seconds after the other actor's event (default 0).
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub delay_s: Option<f64>,
     /// Chained trigger: which event of the other actor (default `start`).
     #[serde(default)]
@@ -225,10 +240,12 @@ pub enum ChainEventSpec {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LaneChangeSpec {
+    #[schemars(range(min = 0))]
     pub at_s: f64,
     pub to_lane: String,
     /// Length of the manoeuvre along the path (default 20 m).
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub length_m: Option<f64>,
 }
 
@@ -238,6 +255,7 @@ pub struct LaneChangeSpec {
 pub struct LightPhaseSpec {
     /// SUMO state string, one character per link index.
     pub state: String,
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub duration_s: f64,
 }
 
@@ -253,6 +271,7 @@ pub struct LightOverrideSpec {
     #[serde(default)]
     pub start_phase: Option<usize>,
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub phase_elapsed_s: Option<f64>,
     #[serde(default)]
     pub phases: Option<Vec<LightPhaseSpec>>,
@@ -270,23 +289,29 @@ pub struct LightOverrideSpec {
 #[schemars(transform = crate::scenario::schema_rules::brake_alternatives)]
 pub struct BrakeSpec {
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub at_s: Option<f64>,
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub after_s: Option<f64>,
     /// Brake when the ego centre comes within this radius of `of` (default: the actor's centre).
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub ego_within_m: Option<f64>,
     /// Brake when the ego's bumper gap behind the actor (along the ego route) is at most this, m.
     #[serde(default)]
     pub ego_gap_m: Option<f64>,
     /// Brake when the ego's time gap (bumper gap ÷ ego speed) is at most this, s.
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub ego_gap_s: Option<f64>,
     /// Brake when the ego's time to collision (bumper gap ÷ closing speed) is at most this, s.
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub ego_ttc_s: Option<f64>,
     /// Brake when the ego is expected to reach `of` (required) within this many seconds.
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub ego_eta_s: Option<f64>,
     /// Point of `ego_within_m` / `ego_eta_s`: `[x, y]`, a place, or `"actor_self"` (the actor
     /// where it is at that moment; `ego_within_m` only).
@@ -294,20 +319,25 @@ pub struct BrakeSpec {
     pub of: Option<OfSpec>,
     /// Brake once the actor's `pace` gap has stayed within tolerance of its target this long, s.
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub gap_held_s: Option<f64>,
     /// Chained: name of the actor whose `event` this brake follows.
     #[serde(default)]
     pub after: Option<String>,
     /// Chained: seconds after the other actor's event (default 0).
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub delay_s: Option<f64>,
     /// Chained: which event of the other actor (default `start`).
     #[serde(default)]
     pub event: Option<ChainEventSpec>,
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub decel_mps2: f64,
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub to_speed_mps: f64,
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub hold_s: Option<f64>,
 }
 
@@ -322,6 +352,7 @@ pub struct BrakeSpec {
 pub struct PaceSpec {
     /// Time part of the gap: seconds at the ego's speed.
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub gap_s: Option<f64>,
     /// Distance part of the gap, m (may be negative: the actor's rear behind the ego's front).
     #[serde(default)]
@@ -334,12 +365,15 @@ pub struct PaceSpec {
     pub offset_s: Option<f64>,
     /// Lower speed bound (default 0: the actor may wait).
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub min_speed_mps: Option<f64>,
     /// Upper speed bound (default 1.5 × the actor's speed).
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub max_speed_mps: Option<f64>,
     /// Arc length along the path where pacing ends (default: never).
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub until_s: Option<f64>,
 }
 
@@ -355,12 +389,15 @@ pub struct ActorSpec {
     /// Cruise speed; per-waypoint speeds override it leg by leg. Default by kind
     /// (pedestrian 1.2, cyclist 4.0, others 8.0 m/s).
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub speed_mps: Option<f64>,
     /// Speed at the moment of triggering (default: the first leg's speed).
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub initial_speed_mps: Option<f64>,
     /// Limit on speed changes between legs (default: pedestrians instant, others 3.0 m/s²).
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub accel_mps2: Option<f64>,
     #[serde(default)]
     pub waypoints: Option<Vec<WaypointSpec>>,
@@ -379,10 +416,13 @@ pub struct ActorSpec {
     #[serde(default)]
     pub at_end: AtEndSpec,
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub length_m: Option<f64>,
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub width_m: Option<f64>,
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub height_m: Option<f64>,
     #[serde(default)]
     pub color: Option<[u8; 3]>,

@@ -74,7 +74,7 @@ pub enum LaneChoice {
 #[serde(untagged)]
 #[schemars(transform = crate::scenario::schema_rules::speed_names)]
 pub enum SpeedChoice {
-    Value(f64),
+    Value(#[schemars(range(min = 0))] f64),
     Named(String),
 }
 
@@ -91,6 +91,7 @@ pub struct TrafficSpec {
     /// Seconds the traffic runs before t = 0 (the ego standing at its start), so the episode
     /// starts in flowing traffic.
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub warmup_s: Option<f64>,
     #[serde(default)]
     pub vehicles: Vec<TrafficVehicleSpec>,
@@ -114,14 +115,18 @@ pub struct TrafficVehicleSpec {
     #[serde(default)]
     pub depart_lane: Option<LaneChoice>,
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub depart_pos_m: Option<f64>,
     #[serde(default)]
     pub depart_speed: Option<SpeedChoice>,
     /// This vehicle's maximum speed, m/s (a derived vType; native: caps the desired speed).
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub max_speed_mps: Option<f64>,
     /// This vehicle's speed factor on the lane speed limit (SUMO `speedFactor`).
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
+    #[schemars(range(max = 5))]
     pub speed_factor: Option<f64>,
 }
 
@@ -138,9 +143,12 @@ pub struct TrafficFlowSpec {
     #[serde(default)]
     pub via: Vec<String>,
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub vehs_per_hour: Option<f64>,
     /// Chance of a departure each second.
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
+    #[schemars(range(max = 1))]
     pub probability: Option<f64>,
     #[serde(default)]
     pub begin_s: Option<f64>,
@@ -151,14 +159,18 @@ pub struct TrafficFlowSpec {
     #[serde(default)]
     pub depart_lane: Option<LaneChoice>,
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub depart_pos_m: Option<f64>,
     #[serde(default)]
     pub depart_speed: Option<SpeedChoice>,
     /// Maximum speed of the flow's vehicles, m/s.
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub max_speed_mps: Option<f64>,
     /// Speed factor of the flow's vehicles (each gets exactly this factor).
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
+    #[schemars(range(max = 5))]
     pub speed_factor: Option<f64>,
 }
 
@@ -166,15 +178,18 @@ pub struct TrafficFlowSpec {
 #[serde(deny_unknown_fields)]
 pub struct RandomTripsSpec {
     /// Vehicles per km of lane (lanes open to each type's class) at SUMO time 0.
+    #[schemars(range(min = 0))]
     pub density_per_km: f64,
     /// Vehicle types and their weights (default `{ car = 1.0 }`).
     #[serde(default)]
     pub mix: Option<BTreeMap<String, f64>>,
     /// Only departure edges within this distance of the ego route (default: the whole map).
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub within_m: Option<f64>,
     /// Routes are random walks over the lane graph of at least this length (default 1000 m).
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub min_route_m: Option<f64>,
 }
 

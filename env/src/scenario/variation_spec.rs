@@ -14,31 +14,39 @@ use std::path::Path;
 pub struct VariationSpec {
     /// The ego starts up to this far further along its route, m (default 2).
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub ego_start_m: Option<f64>,
     /// Relative jitter of the ego's initial speed, ± (default 0.1).
     #[serde(default)]
+    #[schemars(range(min = 0, max = 0.5))]
     pub ego_speed: Option<f64>,
     /// Scripted actors' start moved along their path by up to ± this, m (default by kind:
     /// pedestrian 0.3, cyclist 1, others 2).
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub actor_start_m: Option<f64>,
     /// Relative jitter of scripted actors' speeds, ± (default 0.08).
     #[serde(default)]
+    #[schemars(range(min = 0, max = 0.5))]
     pub actor_speed: Option<f64>,
     /// Relative jitter of trigger and brake thresholds (times, radii, ETAs, gaps, delays,
     /// decelerations, holds), ± (default 0.1).
     #[serde(default)]
+    #[schemars(range(min = 0, max = 0.5))]
     pub trigger: Option<f64>,
     /// Obstacles moved along their heading by up to ± this, m (default 0.5).
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub obstacle_m: Option<f64>,
     /// Background traffic: departure times (vehicles, flow begins) moved by up to ± this, s
     /// (default 1.5; never before the warm-up starts).
     #[serde(default)]
+    #[schemars(range(min = 0))]
     pub traffic_depart_s: Option<f64>,
     /// Background traffic: relative jitter of the speed factors given per vehicle / flow, ±
     /// (default 0.05; SUMO draws the others from `speedDev` with its `--seed`).
     #[serde(default)]
+    #[schemars(range(min = 0, max = 0.5))]
     pub traffic_speed: Option<f64>,
 }
 

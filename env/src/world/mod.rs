@@ -740,6 +740,17 @@ impl World {
         self.actor_index(id).map_or(0, |i| self.actors[i].signals)
     }
 
+    /// How actor `id` moves: `"static"` (obstacles), `"scripted"`, `"external"` or `"traffic"`
+    /// (None for an unknown id). Open-loop generation tells parked from stopped vehicles by it.
+    pub fn actor_motion(&self, id: u32) -> Option<&'static str> {
+        Some(match self.actors.get(self.actor_index(id)?)?.motion {
+            Motion::Static => "static",
+            Motion::Scripted(_) => "scripted",
+            Motion::External => "external",
+            Motion::Traffic(_) => "traffic",
+        })
+    }
+
     /// Whether actor `id` is a background-traffic vehicle.
     pub fn is_traffic_actor(&self, id: u32) -> bool {
         self.traffic_key(id).is_some()

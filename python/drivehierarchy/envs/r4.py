@@ -85,6 +85,8 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         scenario: str | Path | None = None,
         config: R4Config | dict[str, Any] | None = None,
         render_mode: str | None = None,
+        *,
+        scenario_text: str | None = None,
         **overrides: Any,
     ) -> None:
         if isinstance(config, dict):
@@ -103,6 +105,8 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         self._sumo: _core.SumoSession | None = None
         self._closed = False
         self._live = False  # an episode is running (reset since the last load/copy)
+        # The scenario's TOML standing for the file (the editor's unsaved buffer), or None.
+        self._scenario_text = scenario_text
         self._load(config.scenario)
 
         obs: dict[str, spaces.Space[Any]] = {}
@@ -130,11 +134,13 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
 
     # -- loading -------------------------------------------------------------------------
     def _load(self, scenario: str | None) -> None:
-        path = resolve_scenario(scenario)
+        # A buffer stands for its file, which need not exist yet.
+        path = str(scenario) if self._scenario_text is not None else resolve_scenario(scenario)
         if self._sim is not None and path == self._scenario_path:
             return
         self._live = False
-        self._sim = _core.Sim(path, self.config.to_json(), sumo_home())
+        text, self._scenario_text = self._scenario_text, None  # only for the first scenario
+        self._sim = _core.Sim(path, self.config.to_json(), sumo_home(), text)
         self._scenario_path = path
         self._configure_traffic()
 

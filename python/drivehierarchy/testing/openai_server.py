@@ -31,6 +31,7 @@ import re
 import sys
 import threading
 import time
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
@@ -110,6 +111,7 @@ Policy = Callable[[ChatRequest], "str | Fault"]
 _ROUTE_RE = re.compile(r"\(forward_m, right_m\): \[([^\]]*)\]")
 _POINT_RE = re.compile(r"\((-?[\d.]+), (-?[\d.]+)\)")
 _SPEED_RE = re.compile(r"driving at the speed of (-?[\d.]+) m/s")
+ATTEMPTS_KEPT = 4096
 MALFORMED_REPLY = "I would keep an eye on the road and drive carefully."
 
 
@@ -237,7 +239,9 @@ class ScriptedOpenAIServer:
         self.keep_log = False
         self._rng = random.Random(seed)
         self._lock = threading.Lock()
-        self._attempts: dict[str, int] = {}
+        # Attempts per identical body, for retries; bounded (oldest first out) so a long soak
+        # does not grow it without end. Retries come within seconds, long before eviction.
+        self._attempts: OrderedDict[str, int] = OrderedDict()
         self._httpd = _Server((host, port), _make_handler(self))
         self._thread: threading.Thread | None = None
 
@@ -291,8 +295,10 @@ class ScriptedOpenAIServer:
         key = hashlib.sha256(raw).hexdigest()
         with self._lock:
             self.stats.chat_requests += 1
-            attempt = self._attempts.get(key, 0) + 1
+            attempt = self._attempts.pop(key, 0) + 1
             self._attempts[key] = attempt
+            if len(self._attempts) > ATTEMPTS_KEPT:
+                self._attempts.popitem(last=False)
             roll = self._rng.random()
         req = parse_chat_request(body, attempt)
         if self.keep_log:

@@ -1,7 +1,8 @@
 """Weight calibration from a pool of models' task scores (`drivehierarchy openloop calibrate`).
 
 SCORES.csv has a `model` column and one column per task id (`R1_1_A … R3_2`, any subset that
-covers every rank with a budget) holding task scores in 0–100. The weights follow PROTOCOL
+covers every rank with a budget) holding task scores in 0–100; the report's `table1.csv` is one
+(its `avg_score` and rank columns are skipped). The weights follow PROTOCOL
 §1.4: Spearman ρ between tasks across models, L_i = 1 + λ_same Σ_same max(ρ,0)^γ + λ_cross
 Σ_other max(ρ,0)^γ, u_i = 1/L_i normalised within the rank, times the rank budget. The
 arithmetic is in Rust (`dh-benchmark`).
@@ -18,8 +19,13 @@ from typing import Any, NamedTuple
 
 from drivehierarchy import ConfigError, _core
 
-DEFAULT_BUDGETS: dict[str, float] = {"R1": 0.3, "R2": 0.3, "R3": 0.4}
+# PROTOCOL §1.4's λ_same, λ_cross, γ and rank budgets, as the Rust calibration defines them.
+DEFAULTS: dict[str, Any] = dict(_core.openloop_calibration_defaults())
+DEFAULT_BUDGETS: dict[str, float] = dict(DEFAULTS["budgets"])
 TASK_IDS: tuple[str, ...] = tuple(t["id"] for t in _core.openloop_tasks())
+# Columns `openloop report`'s table1.csv writes beside the tasks: its output feeds calibration.
+NOT_SCORED = ("", "–", "-")
+REPORT_COLUMNS: frozenset[str] = frozenset({"avg_score", *(t["rank"] for t in _core.openloop_tasks())})
 
 
 class ScoresTable(NamedTuple):
@@ -46,13 +52,19 @@ def read_scores_csv(path: str | Path) -> ScoresTable:
         raise ConfigError(f"{p}: header has no `model` column: {header}")
     task_cols: list[tuple[int, str]] = []
     for i, name in enumerate(header):
-        if name == "model":
+        if name == "model" or name in REPORT_COLUMNS:
             continue
         if name not in TASK_IDS:
             raise ConfigError(f"{p}: column {i + 1} `{name}` is not a task id (expected one of {TASK_IDS})")
         if name in [t for _, t in task_cols]:
             raise ConfigError(f"{p}: column `{name}` appears twice")
         task_cols.append((i, name))
+    # A task nobody scored (R1_4 without the judge: `–` in table1.csv) is left out, not a 0.
+    task_cols = [
+        (i, name)
+        for i, name in task_cols
+        if not all(len(row) > i and row[i].strip() in NOT_SCORED for row in rows[1:])
+    ]
     if not task_cols:
         raise ConfigError(f"{p}: no task columns")
     mcol = header.index("model")
@@ -86,12 +98,13 @@ def read_scores_csv(path: str | Path) -> ScoresTable:
 def calibrate_details(
     table: ScoresTable | tuple[Sequence[str], Sequence[str], Sequence[Sequence[float]]],
     *,
-    lambda_same: float = 1.0,
-    lambda_cross: float = 0.35,
-    gamma: float = 2.0,
+    lambda_same: float | None = None,
+    lambda_cross: float | None = None,
+    gamma: float | None = None,
     budgets: Mapping[str, float] | None = None,
 ) -> dict[str, Any]:
-    """Weights plus the intermediate ρ matrix, loads L_i and uniqueness u_i."""
+    """Weights plus the intermediate ρ matrix, loads L_i and uniqueness u_i (a parameter left
+    as None takes its default, `DEFAULTS`)."""
     _models, tasks, matrix = table
     return dict(
         _core.openloop_calibrate(
@@ -100,7 +113,7 @@ def calibrate_details(
             lambda_same,
             lambda_cross,
             gamma,
-            dict(budgets) if budgets is not None else dict(DEFAULT_BUDGETS),
+            dict(budgets) if budgets is not None else None,
         )
     )
 
@@ -108,9 +121,9 @@ def calibrate_details(
 def calibrate(
     table: ScoresTable | tuple[Sequence[str], Sequence[str], Sequence[Sequence[float]]],
     *,
-    lambda_same: float = 1.0,
-    lambda_cross: float = 0.35,
-    gamma: float = 2.0,
+    lambda_same: float | None = None,
+    lambda_cross: float | None = None,
+    gamma: float | None = None,
     budgets: Mapping[str, float] | None = None,
 ) -> dict[str, float]:
     """Task id → weight (in the table's task order) from `(models, tasks, matrix)`."""

@@ -3,13 +3,15 @@
 A catalog is `{"name": ..., "root": DIR, "datasets": [{"name", "path", "task"}]}` where `task` is
 the answer kind (`yes_no`, `numeric`, ...) and a relative `root` is resolved against the
 catalog file's folder. `--data-dir DIR` builds the same catalog in memory for the 14 released
-file names.
+file names. A relative image path in a record (generated sets, `openloop generate`) is resolved
+against its task file's folder.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -214,6 +216,13 @@ def load_dataset(
         seen.add(rec.id)
         if roots.pairs:
             imgs = tuple(ImageRef(roots.apply(i.path), i.label) for i in rec.images)
+            rec = Record(**{**rec.__dict__, "images": imgs})
+        if any(not os.path.isabs(i.path) for i in rec.images):
+            # Relative image paths (generated sets) are relative to the task file's folder.
+            imgs = tuple(
+                ImageRef(i.path if os.path.isabs(i.path) else str(path.parent / i.path), i.label)
+                for i in rec.images
+            )
             rec = Record(**{**rec.__dict__, "images": imgs})
         out.records.append(rec)
     return out

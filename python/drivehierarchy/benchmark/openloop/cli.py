@@ -1,4 +1,4 @@
-"""`drivehierarchy openloop ...`: predict, score, calibrate, report, deficit, export-sft."""
+"""`drivehierarchy openloop ...`: predict, score, generate, calibrate, report, deficit, export-sft."""
 
 from __future__ import annotations
 
@@ -51,6 +51,27 @@ def register(subparsers: Any) -> None:
         help="folder layout (default: detected)",
     )
     p.set_defaults(func=_cmd_score)
+
+    p = sub.add_parser(
+        "generate",
+        help="generate R1–R3 question files (+ images) from the R4 suite's scenes, exact ground truth",
+    )
+    p.add_argument(
+        "--suite", required=True, type=Path, help="scenario folder (e.g. scenarios/r4) or one file"
+    )
+    p.add_argument("--out", required=True, type=Path, help="output folder (the 14 task files + images/)")
+    p.add_argument("--per-task", type=int, default=200, help="records per task (default 200)")
+    p.add_argument("--seed", type=int, default=0, help="seed of every choice (default 0)")
+    p.add_argument(
+        "--split",
+        choices=("eval", "train"),
+        default="eval",
+        help="eval: the R4 scenes (seeds 0-4); train: other seeds/traffic on the same maps",
+    )
+    p.add_argument("--tasks", default=None, help="comma-separated task ids (default: all)")
+    p.add_argument("--jobs", type=int, default=2, help="rollout worker processes (default 2)")
+    p.add_argument("--no-progress", action="store_true", help="no progress lines on stderr")
+    p.set_defaults(func=_cmd_generate)
 
     p = sub.add_parser("calibrate", help="recompute task weights from a pool of models' task scores")
     p.add_argument(
@@ -187,6 +208,25 @@ def _headline(result: dict[str, Any]) -> dict[str, Any]:
     if skipped:
         keep["skipped_lines"] = skipped
     return keep
+
+
+def _cmd_generate(args: argparse.Namespace) -> int:
+    from .generate.writer import generate
+
+    summary = generate(
+        args.suite,
+        args.out,
+        per_task=args.per_task,
+        seed=args.seed,
+        split=args.split,
+        tasks=[t.strip() for t in args.tasks.split(",") if t.strip()] if args.tasks else None,
+        jobs=args.jobs,
+        progress=not args.no_progress,
+    )
+    for task, info in summary["tasks"].items():
+        print(f"{task}\t{info['records']}\t{info['file']}")
+    print(f"wrote {args.out} ({summary['images']} images)", file=sys.stderr)
+    return 0
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:

@@ -56,8 +56,10 @@ def detect_layout(run: Path, layout: str = "auto") -> tuple[str, list[Path]]:
     """(layout, prediction files) of a results folder; ConfigError when there are none."""
     if layout not in LAYOUTS:
         raise ConfigError(f"layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
+    if not run.exists():
+        raise ConfigError(f"{run}: no such folder")
     if not run.is_dir():
-        raise ConfigError(f"{run}: not a results folder")
+        raise ConfigError(f"{run}: not a results folder (a file, not a folder)")
     flat = sorted(p for p in run.glob("*" + ORIGINAL_SUFFIX) if p.is_file())
     pred_dir = run / "predictions"
     ours = sorted(p for p in pred_dir.glob("*.jsonl") if p.is_file()) if pred_dir.is_dir() else []

@@ -1,0 +1,417 @@
+"""The editor's ASGI app (Starlette): the page, its assets, and a JSON API over `_core`.
+
+A local server that writes files, so every request is checked before it reaches a route:
+
+* Host must be the server's own name (127.0.0.1 / localhost): a DNS-rebinding page gets 403;
+* a request carrying a foreign Origin gets 403, and a state-changing request (POST) must carry
+  the page's own Origin (browsers always send it on POST), so a cross-site form or fetch cannot
+  save files;
+* bodies over `max_body_bytes` get 413;
+* file paths are confined to the root folder (`files.confine`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import threading
+from collections.abc import AsyncIterator, Iterator
+from pathlib import Path
+from typing import Any
+
+import tomlkit
+from starlette.applications import Starlette
+from starlette.middleware import Middleware
+from starlette.middleware.trustedhost import TrustedHostMiddleware
+from starlette.requests import Request
+from starlette.responses import FileResponse, JSONResponse, PlainTextResponse, Response
+from starlette.routing import Mount, Route
+from starlette.staticfiles import StaticFiles
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from drivehierarchy import DriveHierarchyError, _core
+from drivehierarchy.editor import files
+from drivehierarchy.editor.scene import PROBE_CELLS, PlayerCache, ScenePlayer
+from drivehierarchy.scenarios import builtin_root, builtin_scenarios, sumo_home
+
+STATIC = Path(__file__).resolve().parent / "static"
+ALLOWED_HOSTS = ("127.0.0.1", "localhost")
+MAX_BODY_BYTES = 2_000_000
+SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
+
+
+class OriginAndSizeGuard:
+    """Refuses foreign Origins, POSTs without the page's Origin, and oversized bodies."""
+
+    def __init__(self, app: ASGIApp, max_body_bytes: int = MAX_BODY_BYTES) -> None:
+        self.app = app
+        self.max_body_bytes = max_body_bytes
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope["headers"]}
+        host = headers.get("host", "")
+        origin = headers.get("origin")
+        name = host.rsplit(":", 1)[0] if not host.startswith("[") else host
+        if name not in ALLOWED_HOSTS:
+            # DNS rebinding: a page of another name resolved to 127.0.0.1.
+            await PlainTextResponse(f"refused: foreign Host {host!r}", 403)(scope, receive, send)
+            return
+        own = {f"http://{host}"}
+        if origin is not None and origin not in own:
+            await PlainTextResponse(f"refused: foreign Origin {origin!r}", 403)(scope, receive, send)
+            return
+        if scope["method"] not in SAFE_METHODS and origin is None:
+            msg = "refused: a state-changing request must carry the page's Origin header"
+            await PlainTextResponse(msg, 403)(scope, receive, send)
+            return
+        if headers.get("sec-fetch-site") not in (None, "same-origin", "none"):
+            msg = f"refused: cross-site request (Sec-Fetch-Site: {headers['sec-fetch-site']})"
+            await PlainTextResponse(msg, 403)(scope, receive, send)
+            return
+        length = headers.get("content-length")
+        if length is not None and (not length.isdigit() or int(length) > self.max_body_bytes):
+            msg = f"refused: request body of {length} bytes (limit {self.max_body_bytes})"
+            await PlainTextResponse(msg, 413)(scope, receive, send)
+            return
+        seen = 0
+        limit = self.max_body_bytes
+
+        async def counted() -> Message:
+            nonlocal seen
+            message = await receive()
+            if message["type"] == "http.request":
+                seen += len(message.get("body", b""))
+                if seen > limit:
+                    raise BodyTooLarge
+            return message
+
+        try:
+            await self.app(scope, counted, send)
+        except BodyTooLarge:
+            await PlainTextResponse(f"refused: request body over {limit} bytes", 413)(scope, receive, send)
+
+
+class BodyTooLarge(Exception):
+    pass
+
+
+class Editor:
+    """State of one editor server: its root folder, default map and players."""
+
+    def __init__(self, root: Path, default_map: str | None = None) -> None:
+        self.root = root.resolve()
+        self.default_map = default_map
+        # Each player has its own lock: a request on one buffer never waits for work on another.
+        self.players = PlayerCache()
+        # Requests being served: the precompute thread yields the CPU to them.
+        self.in_flight = 0
+        self._count_lock = threading.Lock()
+
+    @contextlib.contextmanager
+    def serving(self) -> Iterator[None]:
+        with self._count_lock:
+            self.in_flight += 1
+        try:
+            yield
+        finally:
+            with self._count_lock:
+                self.in_flight -= 1
+
+    def precompute(self, stop: threading.Event) -> None:
+        """Works ahead for the most recent player, one short unit at a time under its lock, so
+        requests on it get the lock in between."""
+        while not stop.is_set():
+            if self.in_flight:
+                stop.wait(0.02)
+                continue
+            player = self.players.most_recent()
+            try:
+                busy = player is not None and player.precompute_step()
+            except Exception:  # a closed player, or a buffer the world cannot play (requests say why)
+                busy = False
+            stop.wait(0.005 if busy else 0.2)
+
+    # -- helpers ---------------------------------------------------------------------------
+    def abs_path(self, rel: str) -> Path:
+        return files.confine(self.root, rel)
+
+    def map_spec_for(self, rel: str, spec: str) -> str:
+        """A scenario's `map` value as `_core` reads it from anywhere (relative → absolute)."""
+        if spec.startswith(("sumo:", "builtin:")) or os.path.isabs(spec):
+            return spec
+        return str((self.abs_path(rel).parent / spec).resolve())
+
+    def geometry(self, rel: str, text: str) -> dict[str, Any]:
+        """`{ok, geometry | error, doc}`: the world's resolution of the text, or the validator's
+        message split into file, line, column, field, value and reason; `doc` is the TOML as
+        data (what the page's forms show)."""
+        doc = files.doc_json(text)
+        return {"doc": doc, **self._resolve(rel, text)}
+
+    def _resolve(self, rel: str, text: str) -> dict[str, Any]:
+        try:
+            geo = json.loads(_core.scenario_geometry(str(self.abs_path(rel)), text, sumo_home()))
+        except DriveHierarchyError as exc:
+            msg = str(exc).replace(str(self.root) + os.sep, "")
+            return {"ok": False, "error": files.parse_error(msg)}
+        geo["summary"]["file"] = rel
+        return {"ok": True, "geometry": geo}
+
+
+def _json(request_body: bytes) -> dict[str, Any]:
+    try:
+        data = json.loads(request_body or b"{}")
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"request body: not JSON ({exc})") from exc
+    if not isinstance(data, dict):
+        raise ValueError("request body: expected a JSON object")
+    return data
+
+
+def _field(data: dict[str, Any], key: str, kind: type | tuple[type, ...]) -> Any:
+    if key not in data or not isinstance(data[key], kind):
+        raise ValueError(f"request field `{key}`: missing or not a {getattr(kind, '__name__', kind)}")
+    return data[key]
+
+
+def templates() -> dict[str, str]:
+    """One template per category: its first built-in scenario on the shipped town01 map (the
+    small one every category has), else its first scenario."""
+    out: dict[str, str] = {}
+    for p in sorted(builtin_scenarios(), key=lambda p: (not p.stem.startswith("town01"), p.name)):
+        out.setdefault(p.parent.name, str(p))
+    return dict(sorted(out.items()))
+
+
+def template_text(category: str, new_id: str) -> str:
+    """A category's template with its id and name set and its map made location-independent."""
+    path = templates().get(category)
+    if path is None:
+        raise ValueError(f"category {category!r}: no template (known: {', '.join(sorted(templates()))})")
+    doc = tomlkit.parse(Path(path).read_text(encoding="utf-8"))
+    doc["id"] = new_id
+    doc["name"] = new_id.replace("_", " ")
+    spec = str(doc["map"])
+    if not spec.startswith(("sumo:", "builtin:")):
+        real = (Path(path).parent / spec).resolve()
+        maps = (builtin_root() / "maps").resolve()
+        if real.parent.parent == maps and real.name == f"{real.parent.name}.net.xml":
+            doc["map"] = f"builtin:{real.parent.name}"
+        else:
+            doc["map"] = str(real)
+    return tomlkit.dumps(doc)
+
+
+def blank_text(new_id: str, category: str, map_spec: str) -> str:
+    """A new scenario with nothing placed yet (invalid until the ego has a start and a goal)."""
+    doc = tomlkit.document()
+    doc["version"] = 1
+    doc["id"] = new_id
+    doc["name"] = new_id.replace("_", " ")
+    doc["category"] = category
+    doc["map"] = map_spec
+    doc["ego"] = tomlkit.table()
+    return tomlkit.dumps(doc)
+
+
+def create_app(
+    root: Path,
+    default_map: str | None = None,
+    *,
+    max_body_bytes: int = MAX_BODY_BYTES,
+    precompute: bool = True,
+) -> Starlette:
+    """The editor on `root`. `precompute`: a background thread drives the most recently
+    previewed buffer to its end and renders its frames ahead of the slider."""
+    ed = Editor(root, default_map)
+
+    def api(fn: Any) -> Any:
+        """Runs a sync handler in the thread pool; errors → 400 (403 for refused paths)."""
+
+        async def endpoint(request: Request) -> Response:
+            body = await request.body() if request.method == "POST" else b""
+            from starlette.concurrency import run_in_threadpool
+
+            try:
+                with ed.serving():
+                    return await run_in_threadpool(fn, request, body)
+            except files.PathRefused as exc:
+                return JSONResponse({"error": str(exc)}, 403)
+            except (ValueError, DriveHierarchyError) as exc:
+                return JSONResponse({"error": str(exc)}, 400)
+
+        return endpoint
+
+    def index(request: Request, body: bytes) -> Response:
+        return FileResponse(STATIC / "index.html")
+
+    def info(request: Request, body: bytes) -> Response:
+        return JSONResponse(
+            {
+                "root": str(ed.root),
+                "default_map": ed.default_map,
+                "files": files.list_scenarios(ed.root),
+                "categories": sorted(templates()),
+                "probe_cells": list(PROBE_CELLS),
+            }
+        )
+
+    def read(request: Request, body: bytes) -> Response:
+        rel = request.query_params.get("path", "")
+        p = files.confine(ed.root, rel, must_exist=True)
+        if p.stat().st_size > files.MAX_FILE_BYTES:
+            raise ValueError(f"{rel}: larger than {files.MAX_FILE_BYTES} bytes")
+        # newline="" keeps the file's line endings, so an unchanged save is byte-identical.
+        with p.open(encoding="utf-8", newline="") as fh:
+            text = fh.read()
+        return JSONResponse({"path": rel, "text": text, **ed.geometry(rel, text)})
+
+    def map_geometry(request: Request, body: bytes) -> Response:
+        spec = request.query_params.get("map") or ed.default_map
+        if not spec:
+            raise ValueError("query `map`: give the scenario's map (or start the editor with --map)")
+        rel = request.query_params.get("path")
+        if rel:
+            spec = ed.map_spec_for(rel, spec)
+        return Response(_core.map_geometry(spec, sumo_home()), media_type="application/json")
+
+    def snap(request: Request, body: bytes) -> Response:
+        d = _json(body)
+        spec = ed.map_spec_for(_field(d, "path", str), _field(d, "map", str))
+        hit = _core.snap_to_lane(
+            spec,
+            float(_field(d, "x", (int, float))),
+            float(_field(d, "y", (int, float))),
+            float(d.get("max_dist_m", 10.0)),
+            d.get("vclass"),
+            bool(d.get("internal", False)),
+            sumo_home(),
+        )
+        if hit is None:
+            return JSONResponse({"lane": None})
+        lane, s, dist = hit
+        return JSONResponse({"lane": lane, "s": round(s, 1), "distance_m": dist})
+
+    def validate(request: Request, body: bytes) -> Response:
+        d = _json(body)
+        return JSONResponse(ed.geometry(_field(d, "path", str), _field(d, "text", str)))
+
+    def edit(request: Request, body: bytes) -> Response:
+        d = _json(body)
+        rel, text = _field(d, "path", str), _field(d, "text", str)
+        new = files.apply_edits(text, _field(d, "edits", list))
+        return JSONResponse({"text": new, **ed.geometry(rel, new)})
+
+    def save(request: Request, body: bytes) -> Response:
+        d = _json(body)
+        rel, text = _field(d, "path", str), _field(d, "text", str)
+        p = ed.abs_path(rel)
+        if d.get("create") and p.exists():
+            raise ValueError(f"{rel}: exists already (save as a new name, or open it)")
+        if len(text.encode("utf-8")) > files.MAX_FILE_BYTES:
+            raise ValueError(f"{rel}: larger than {files.MAX_FILE_BYTES} bytes")
+        checked = ed.geometry(rel, text)
+        if not checked["ok"]:
+            return JSONResponse({"saved": False, **checked}, 422)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        files.confine(ed.root, rel)  # again: the folder just made must not be a symlink out
+        tmp = p.with_name(f".{p.name}.tmp")
+        with tmp.open("w", encoding="utf-8", newline="") as fh:
+            fh.write(text)
+        os.replace(tmp, p)
+        return JSONResponse({"saved": True, "path": rel, **checked})
+
+    def new(request: Request, body: bytes) -> Response:
+        d = _json(body)
+        new_id = _field(d, "id", str)
+        category = _field(d, "category", str)
+        if d.get("template", True):
+            text = template_text(category, new_id)
+        else:
+            text = blank_text(new_id, category, _field(d, "map", str) if "map" in d else ed.default_map or "")
+        rel = f"{category}/{new_id}.toml"
+        files.confine(ed.root, rel)
+        return JSONResponse({"path": rel, "text": text, **ed.geometry(rel, text)})
+
+    def _player(d: dict[str, Any]) -> Any:
+        rel, text = _field(d, "path", str), _field(d, "text", str)
+        return ed.players.get(str(ed.abs_path(rel)), text, int(d.get("seed", 0)), d.get("driver", "expert"))
+
+    def scene(request: Request, body: bytes) -> Response:
+        d = _json(body)
+        t = float(_field(d, "time_s", (int, float)))
+        return JSONResponse(_player(d).state_at(t))
+
+    def frame(request: Request, body: bytes) -> Response:
+        d = _json(body)
+        t = float(_field(d, "time_s", (int, float)))
+        view = d.get("view", "front")
+        png, time_s = _player(d).png_at(t, view)
+        return Response(png, media_type="image/png", headers={"X-Scene-Time": f"{time_s:.2f}"})
+
+    def run(request: Request, body: bytes) -> Response:
+        return JSONResponse(_player(_json(body)).run_to_end())
+
+    def probe(request: Request, body: bytes) -> Response:
+        d = _json(body)
+        path, text = str(ed.abs_path(_field(d, "path", str))), _field(d, "text", str)
+        out = []
+        for cell in PROBE_CELLS:
+            # One-off players: probing does not push the previewed buffer out of the cache.
+            player = ScenePlayer(path, text, seed=int(d.get("seed", 0)), driver=cell)
+            try:
+                rec = player.run_to_end()["score"]
+            finally:
+                player.close()
+            out.append(
+                {
+                    "cell": cell,
+                    "score": rec["score_composed"],
+                    "termination": rec["termination_reason"],
+                    "events": sorted({e["type"] for e in rec["events"]}),
+                }
+            )
+        return JSONResponse({"probe": out})
+
+    routes = [
+        Route("/", api(index)),
+        Route("/api/info", api(info)),
+        Route("/api/file", api(read)),
+        Route("/api/map", api(map_geometry)),
+        Route("/api/snap", api(snap), methods=["POST"]),
+        Route("/api/validate", api(validate), methods=["POST"]),
+        Route("/api/edit", api(edit), methods=["POST"]),
+        Route("/api/save", api(save), methods=["POST"]),
+        Route("/api/new", api(new), methods=["POST"]),
+        Route("/api/scene", api(scene), methods=["POST"]),
+        Route("/api/frame", api(frame), methods=["POST"]),
+        Route("/api/run", api(run), methods=["POST"]),
+        Route("/api/probe", api(probe), methods=["POST"]),
+        Mount("/static", StaticFiles(directory=STATIC), name="static"),
+    ]
+    # The guard answers a foreign Host with 403; Starlette's TrustedHostMiddleware stays behind
+    # it as a second check of the same rule.
+    middleware = [
+        Middleware(OriginAndSizeGuard, max_body_bytes=max_body_bytes),
+        Middleware(TrustedHostMiddleware, allowed_hosts=list(ALLOWED_HOSTS)),
+    ]
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app: Starlette) -> AsyncIterator[None]:
+        stop = threading.Event()
+        worker = threading.Thread(target=ed.precompute, args=(stop,), daemon=True) if precompute else None
+        if worker is not None:
+            worker.start()
+        yield
+        stop.set()
+        if worker is not None:
+            worker.join(timeout=30)
+        ed.players.close()
+
+    app = Starlette(routes=routes, middleware=middleware, lifespan=lifespan)
+    app.state.editor = ed
+    return app

@@ -1,0 +1,211 @@
+"""The editor's file side: paths confined to the root folder, and TOML edits that keep the file.
+
+Edits are applied to the file's text with `tomlkit`, which keeps comments, order and layout: a
+file loaded and saved with no change is byte-identical, and one edit changes only what it names.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path, PurePosixPath
+from typing import Any
+
+import tomlkit
+from tomlkit.items import AoT, Array, InlineTable, Table
+
+MAX_FILE_BYTES = 1_000_000
+
+
+class PathRefused(ValueError):
+    """A path the editor will not read or write, with the reason."""
+
+
+def confine(root: Path, rel: str, *, must_exist: bool = False) -> Path:
+    """`rel` (a POSIX path relative to `root`) as a path inside `root`, or `PathRefused`.
+
+    Refuses absolute paths, `..` components, and paths that leave the root through a symlink
+    (the file itself or any folder on the way); only `.toml` files are served.
+    """
+    if not rel or "\x00" in rel:
+        raise PathRefused(f"path {rel!r}: empty or contains NUL")
+    if rel.startswith(("/", "\\")) or re.match(r"^[A-Za-z]:", rel) or os.path.isabs(rel):
+        raise PathRefused(f"path {rel!r}: absolute paths are refused; give a path relative to the root")
+    parts = PurePosixPath(rel.replace("\\", "/")).parts
+    if ".." in parts:
+        raise PathRefused(f"path {rel!r}: `..` is refused; the editor stays inside its root folder")
+    if not rel.endswith(".toml"):
+        raise PathRefused(f"path {rel!r}: only scenario files (*.toml) are read and written")
+    root_real = root.resolve()
+    candidate = root_real.joinpath(*parts)
+    real = candidate.resolve()
+    if real != root_real and root_real not in real.parents:
+        raise PathRefused(f"path {rel!r}: leaves the root folder through a symlink ({real})")
+    if must_exist and not real.is_file():
+        raise PathRefused(f"path {rel!r}: no such file")
+    return candidate
+
+
+def list_scenarios(root: Path) -> list[str]:
+    """Every `*.toml` under the root (relative POSIX paths), not following symlinks out."""
+    root_real = root.resolve()
+    out = []
+    for p in sorted(root_real.rglob("*.toml")):
+        real = p.resolve()
+        if (
+            root_real in real.parents
+            and ".venv" not in p.parts
+            and "target" not in p.relative_to(root_real).parts
+        ):
+            out.append(p.relative_to(root_real).as_posix())
+    return out
+
+
+def _container(doc: Any, key: str | int) -> Any:
+    try:
+        return doc[key]
+    except (KeyError, IndexError, TypeError) as exc:
+        raise ValueError(f"no `{key}` here") from exc
+
+
+def _as_toml(value: Any) -> str:
+    item = _item(value)
+    return item.as_string() if hasattr(item, "as_string") else tomlkit.item(item).as_string()
+
+
+def _item(value: Any) -> Any:
+    """A JSON value as a tomlkit item; objects become inline tables (`{ lane = ..., s = ... }`)."""
+    if isinstance(value, dict):
+        # Written as the suite writes them: `{ lane = "C2T_1", s = 140.0 }`.
+        body = ", ".join(f"{tomlkit.key(k).as_string()} = {_as_toml(v)}" for k, v in value.items())
+        return tomlkit.parse(f"v = {{ {body} }}" if body else "v = {}")["v"]
+    if isinstance(value, list):
+        a = tomlkit.array()
+        for v in value:
+            a.append(_item(v))
+        return a
+    return value
+
+
+def _table(value: dict[str, Any]) -> Table:
+    t = tomlkit.table()
+    for k, v in value.items():
+        if isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
+            aot = tomlkit.aot()
+            for x in v:
+                aot.append(_table(x))
+            t[k] = aot
+        elif isinstance(v, dict) and any(isinstance(x, (dict, list)) for x in v.values()):
+            t[k] = _table(v)
+        else:
+            t[k] = _item(v)
+    return t
+
+
+def doc_json(text: str) -> dict[str, Any] | None:
+    """The TOML text as plain JSON-able data (None when it is no TOML)."""
+    try:
+        return tomlkit.parse(text).unwrap()
+    except tomlkit.exceptions.TOMLKitError:
+        return None
+
+
+def path_str(path: list[str | int]) -> str:
+    """`["actors", 0, "start"]` → `actors[0].start` (the validator's field notation)."""
+    out = ""
+    for k in path:
+        out += f"[{k}]" if isinstance(k, int) else (f".{k}" if out else str(k))
+    return out
+
+
+def apply_edits(text: str, edits: list[dict[str, Any]]) -> str:
+    """Applies edits to TOML text: `{"path": [...], "value": v}` sets, `{"path": [...],
+    "delete": true}` removes, `{"path": ["actors"], "append": {...}}` adds a table to an array
+    of tables (created when missing). Everything not named keeps its bytes."""
+    doc = tomlkit.parse(text)
+    for e in edits:
+        path = e.get("path")
+        if not isinstance(path, list) or not path:
+            raise ValueError(f"edit {e!r}: `path` must be a non-empty list of keys and indices")
+        where = path_str(path)
+        parent: Any = doc
+        for k in path[:-1]:
+            if isinstance(k, str) and isinstance(parent, dict) and k not in parent and "delete" not in e:
+                # Setting a key of a missing table makes the table: `[traffic]` at the top,
+                # an inline `{ ... }` inside an entry.
+                top = isinstance(parent, tomlkit.TOMLDocument)
+                parent[k] = tomlkit.table() if top else tomlkit.inline_table()
+            try:
+                parent = _container(parent, k)
+            except ValueError as exc:
+                raise ValueError(f"edit of `{where}`: {exc}") from exc
+        last = path[-1]
+        if "append" in e:
+            value = e["append"]
+            if not isinstance(value, dict):
+                raise ValueError(f"edit of `{where}`: `append` takes a table")
+            if isinstance(parent, (Table, tomlkit.TOMLDocument)) and last not in parent:
+                parent.append(last, tomlkit.aot())
+            target = _container(parent, last)
+            if isinstance(target, AoT):
+                table = tomlkit.table()
+                table.trivia.indent = "\n"  # a blank line before the new `[[...]]`, as the suite has
+                for k, v in value.items():
+                    table[k] = _item(v)
+                target.append(table)
+            elif isinstance(target, Array):
+                target.append(_item(value))
+            else:
+                raise ValueError(f"edit of `{where}`: not an array")
+        elif e.get("delete"):
+            try:
+                del parent[last]
+            except (KeyError, IndexError) as exc:
+                raise ValueError(f"edit of `{where}`: nothing to delete") from exc
+        elif "value" in e:
+            value = e["value"]
+            current = parent.get(last) if isinstance(parent, dict) else None
+            if isinstance(current, InlineTable) and isinstance(value, dict) and set(current) == set(value):
+                # Same keys in place: the table keeps its layout, only changed values differ.
+                for k, v in value.items():
+                    if current.get(k) != v:
+                        current[k] = _item(v)
+                continue
+            try:
+                # A `[table]` stays a table (with `[[sub]]` arrays), not an inline one.
+                parent[last] = (
+                    _table(value) if isinstance(current, Table) and isinstance(value, dict) else _item(value)
+                )
+            except (IndexError, TypeError) as exc:
+                raise ValueError(f"edit of `{where}`: {exc}") from exc
+        else:
+            raise ValueError(f"edit of `{where}`: give `value`, `delete` or `append`")
+    out = tomlkit.dumps(doc)
+    # A table appended at the end still ends the file with a newline.
+    return out + "\n" if text.endswith("\n") and not out.endswith("\n") else out
+
+
+ERROR_RE = re.compile(
+    r"^(?P<file>.*?):(?P<line>\d+):(?P<column>\d+): "
+    r"field `(?P<field>[^`]*)` = (?P<value>.*?): (?P<message>.*)$",
+    re.S,
+)
+ERROR_NOLOC_RE = re.compile(
+    r"^(?P<file>.*?): field `(?P<field>[^`]*)` = (?P<value>.*?): (?P<message>.*)$", re.S
+)
+
+
+def parse_error(message: str) -> dict[str, Any]:
+    """The validator's `file:line:column: field `F` = V: message` split into its parts."""
+    m = ERROR_RE.match(message) or ERROR_NOLOC_RE.match(message)
+    if not m:
+        return {"message": message, "field": None}
+    d = m.groupdict()
+    return {
+        "message": message,
+        "field": d["field"],
+        "value": d["value"],
+        "reason": d["message"],
+        "line": int(d["line"]) if d.get("line") else None,
+        "column": int(d["column"]) if d.get("column") else None,
+    }

@@ -1,0 +1,251 @@
+"""A scenario buffer played from reset by a reference driver: the scene at any time t.
+
+Everything shown comes from the world (`_core.Sim` through the R4 env): actor poses, lights,
+events, the score record and the frames. A player keeps its env live and the state of every
+decision so far, so the scene at an earlier time is a lookup and a frame at a later time only
+ticks the world forward; a frame at an earlier time replays from reset (the drivers are
+deterministic, so the replay is the same episode).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import io
+import json
+import threading
+from collections import OrderedDict
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from drivehierarchy.envs.config import BevConfig, CameraConfig
+
+# The views the editor and `scenario preview` render: the gallery's (front 2× supersampled).
+FRONT = CameraConfig(supersample=2)
+BEV = BevConfig()
+DRIVERS = ("expert", "late_expert", "follower@8", "lights@8", "zero")
+# The reference drivers of the editor's "Probe" (suite_probe cells): solvable (expert), graded
+# (late expert), and not solvable blind (route follower, light-obeying follower).
+PROBE_CELLS = ("expert", "late_expert", "follower@8", "lights@8")
+
+
+def png_bytes(frame: np.ndarray) -> bytes:
+    """A frame as PNG, as `scenario preview --time` writes it (PIL's default zlib level: a
+    fifth of `optimize`'s time, for a few % more bytes)."""
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(frame).save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def _locked(method: Callable[..., Any]) -> Callable[..., Any]:
+    """Runs a player method under the player's lock (requests and the precompute thread share
+    players; the world is stepped by one thread at a time)."""
+
+    @functools.wraps(method)
+    def wrapper(self: ScenePlayer, *args: Any, **kwargs: Any) -> Any:
+        with self.lock:
+            return method(self, *args, **kwargs)
+
+    return wrapper
+
+
+class ScenePlayer:
+    """One buffer (`path` + `text`, or the file itself when `text` is None) driven by `driver`."""
+
+    def __init__(self, path: str, text: str | None, *, seed: int = 0, driver: str = "expert") -> None:
+        from drivehierarchy.envs.r4 import DriveHierarchyR4Env
+        from drivehierarchy.suite_probe import _agent
+
+        if driver not in DRIVERS:
+            raise ValueError(f"driver {driver!r}: expected one of {', '.join(DRIVERS)}")
+        self.lock = threading.RLock()
+        self.seed = seed
+        self.driver = driver
+        self._agent = _agent(driver)
+        # State only: frames are rendered on demand at the editor's (the gallery's) quality.
+        self.env = DriveHierarchyR4Env(scenario=path, scenario_text=text, front=None, bev=None, prompt=False)
+        self.states: list[dict[str, Any]] = []
+        # PNGs by (decision index, view), rendered on request or ahead of it (`precompute_step`).
+        self.frames: dict[tuple[int, str], bytes] = {}
+        self.focus = 0  # the decision last asked for: precomputing starts there
+        self._reset()
+
+    @_locked
+    def close(self) -> None:
+        self.env.close()
+
+    def _reset(self) -> None:
+        self._obs, self._info = self.env.reset(seed=self.seed)
+        self._agent.reset(self.env, self._info)
+        self.done = False
+        self.live_index = 0
+        if not self.states:
+            self.states.append(self._state(self._info))
+
+    @property
+    def time_s(self) -> float:
+        return float(self._info["time_s"])
+
+    def _state(self, info: dict[str, Any]) -> dict[str, Any]:
+        sim = self.env.sim
+        ego = sim.ego_array()
+        actors = sim.actors_array()
+        return {
+            "time_s": float(info["time_s"]),
+            "ego": {
+                "x": ego[0],
+                "y": ego[1],
+                "yaw": ego[2],
+                "speed_mps": ego[3],
+                "length_m": ego[4],
+                "width_m": ego[5],
+            },
+            "actors": [
+                {
+                    "id": int(r[0]),
+                    "x": r[1],
+                    "y": r[2],
+                    "yaw": r[3],
+                    "speed_mps": r[4],
+                    "length_m": r[5],
+                    "width_m": r[6],
+                    "traffic": bool(r[7]),
+                }
+                for r in actors.tolist()
+            ],
+            "lights": [{"tl_id": t, "lane": lane, "color": c} for t, lane, c in sim.light_states()],
+            "events": [e.get("type") for e in info.get("events", [])],
+            "score": info.get("score_composed"),
+            "termination": info.get("termination_reason"),
+        }
+
+    def _step(self) -> None:
+        action = self._agent.act(self._obs, self._info)
+        self._obs, _, terminated, truncated, self._info = self.env.step(action)
+        self.live_index += 1
+        self.done = bool(terminated or truncated)
+        if self.live_index == len(self.states):
+            self.states.append(self._state(self._info))
+
+    def _index_at(self, t: float) -> int:
+        """The last decision at or before t (the first when t precedes it)."""
+        times = [s["time_s"] for s in self.states]
+        i = int(np.searchsorted(times, t + 1e-9, side="right")) - 1
+        return max(i, 0)
+
+    def _extend_to(self, t: float) -> None:
+        """Drives on until the recorded states reach t (or the episode ends)."""
+        if self.live_index != len(self.states) - 1:
+            self._seek(len(self.states) - 1)
+        while not self.done and self.states[-1]["time_s"] < t - 1e-9:
+            self._step()
+
+    def _seek(self, index: int) -> None:
+        """The live world at decision `index` (replaying from reset when it lies behind)."""
+        if index < self.live_index:
+            self._reset()
+        while self.live_index < index and not self.done:
+            self._step()
+
+    @_locked
+    def state_at(self, t: float) -> dict[str, Any]:
+        self._extend_to(t)
+        return self.states[self._index_at(t)]
+
+    @_locked
+    def frame_at(self, t: float, view: str) -> np.ndarray:
+        """The front camera ("front") or BEV ("bev") of the world at the decision at/before t."""
+        self._extend_to(t)
+        return self._render(self._index_at(t), view)
+
+    def _render(self, index: int, view: str) -> np.ndarray:
+        if view not in ("front", "bev"):
+            raise ValueError(f"view {view!r}: expected 'front' or 'bev'")
+        self._seek(index)
+        sim = self.env.sim
+        if view == "front":
+            return sim.render_camera(json.dumps(dataclasses.asdict(FRONT)))
+        return sim.render_bev(json.dumps(dataclasses.asdict(BEV)))
+
+    @_locked
+    def png_at(self, t: float, view: str) -> tuple[bytes, float]:
+        """`frame_at` as PNG (cached per decision) and the decision's time."""
+        self._extend_to(t)
+        index = self._index_at(t)
+        self.focus = index
+        key = (index, view)
+        if key not in self.frames:
+            self.frames[key] = png_bytes(self._render(index, view))
+        return self.frames[key], self.states[index]["time_s"]
+
+    @_locked
+    def precompute_step(self) -> bool:
+        """One unit of work ahead of the page (False: nothing left): first the whole episode's
+        states (so the scene at any t is a lookup), then one frame, the nearest unrendered
+        decision at or after the focus first."""
+        if not self.done:
+            target = self.states[-1]["time_s"] + 5.0
+            self._extend_to(target)
+            return True
+        n = len(self.states)
+        for index in [*range(self.focus, n), *range(0, self.focus)]:
+            for view in ("front", "bev"):
+                if (index, view) not in self.frames:
+                    self.frames[(index, view)] = png_bytes(self._render(index, view))
+                    return True
+        return False
+
+    @_locked
+    def run_to_end(self) -> dict[str, Any]:
+        """Drives the episode to its end; the playback (every decision's state) and the score."""
+        self._extend_to(float("inf"))
+        self._seek(len(self.states) - 1)
+        return {"driver": self.driver, "states": self.states, "score": self.env.sim.score()}
+
+
+class PlayerCache:
+    """Players by (path, text, seed, driver), least recently used first out."""
+
+    def __init__(self, size: int = 4) -> None:
+        self.size = size
+        self._players: OrderedDict[tuple[str, str | None, int, str], ScenePlayer] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def most_recent(self) -> ScenePlayer | None:
+        with self._lock:
+            return next(reversed(self._players.values()), None)
+
+    def get(self, path: str, text: str | None, seed: int = 0, driver: str = "expert") -> ScenePlayer:
+        key = (path, text, seed, driver)
+        old: list[ScenePlayer] = []
+        with self._lock:
+            player = self._players.get(key)
+            if player is None:
+                player = ScenePlayer(path, text, seed=seed, driver=driver)
+                self._players[key] = player
+                while len(self._players) > self.size:
+                    old.append(self._players.popitem(last=False)[1])
+            self._players.move_to_end(key)
+        for p in old:
+            p.close()  # waits for a request or the precompute thread still using it
+        return player
+
+    def close(self) -> None:
+        with self._lock:
+            players = list(self._players.values())
+            self._players.clear()
+        for p in players:
+            p.close()
+
+
+def preview_frames(path: str, time_s: float, *, seed: int = 0, text: str | None = None) -> dict[str, bytes]:
+    """Front and BEV PNGs of the scene at `time_s` driven by the expert (`scenario preview --time`)."""
+    player = ScenePlayer(path, text, seed=seed)
+    try:
+        return {view: png_bytes(player.frame_at(time_s, view)) for view in ("front", "bev")}
+    finally:
+        player.close()

@@ -1,0 +1,235 @@
+//! What the scenario editor draws, all from the world's own code: a network's geometry, lane
+//! snapping, and a scenario's resolved geometry (ego route, actor paths, triggers) from the text
+//! being edited. The page never re-implements any of it.
+
+use crate::env::{err, map_cache};
+use dh_env::geom::{Pose, Vec2};
+use dh_env::map::{EdgeFunction, Network};
+use dh_env::scenario::{
+    parse_scenario_str, resolve_map_path, ActorMotion, LoadOptions, ResolvedScenario, Summary, Trigger,
+};
+use pyo3::prelude::*;
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+fn pt(p: Vec2) -> Value {
+    json!([p.x, p.y])
+}
+
+fn pose(p: Pose) -> Value {
+    json!({"x": p.pos.x, "y": p.pos.y, "yaw": p.yaw})
+}
+
+fn function_name(f: EdgeFunction) -> &'static str {
+    match f {
+        EdgeFunction::Normal => "normal",
+        EdgeFunction::Internal => "internal",
+        EdgeFunction::Crossing => "crossing",
+        EdgeFunction::WalkingArea => "walkingarea",
+        EdgeFunction::Connector => "connector",
+    }
+}
+
+fn load_map(py: Python<'_>, map: &str, sumo_home: Option<&Path>) -> PyResult<(PathBuf, Arc<Network>)> {
+    let here = Path::new("<command line>");
+    let path = resolve_map_path(here, map, sumo_home).map_err(|e| err(py, e))?;
+    let cache = map_cache();
+    let net = py.detach(|| cache.get_or_load(&path)).map_err(|e| err(py, e))?;
+    Ok((path, net))
+}
+
+/// A network's drawable geometry as JSON: lanes with their centre-line shapes, junction
+/// outlines, signal heads at their stop lines, and each light's program.
+#[pyfunction]
+#[pyo3(signature = (map, sumo_home=None))]
+pub fn map_geometry(py: Python<'_>, map: &str, sumo_home: Option<PathBuf>) -> PyResult<String> {
+    let (path, net) = load_map(py, map, sumo_home.as_deref())?;
+    let lanes: Vec<Value> = net
+        .lanes
+        .iter()
+        .map(|l| {
+            let edge = &net.edges[l.edge];
+            json!({
+                "id": l.id, "edge": edge.id, "function": function_name(edge.function),
+                "index": l.index, "width_m": l.width_m, "length_m": l.length_m,
+                "speed_mps": l.speed_mps, "allow": l.allow.sumo_names(), "drivable": l.is_drivable(),
+                "shape": l.shape.points().iter().map(|&p| pt(p)).collect::<Vec<_>>(),
+            })
+        })
+        .collect();
+    let junctions: Vec<Value> = net
+        .junctions
+        .iter()
+        .map(|j| {
+            json!({
+                "id": j.id, "kind": j.kind, "pos": pt(j.pos),
+                "shape": j.shape.iter().map(|&p| pt(p)).collect::<Vec<_>>(),
+            })
+        })
+        .collect();
+    let heads: Vec<Value> = dh_env::map::signal_heads(&net)
+        .iter()
+        .map(|h| {
+            json!({
+                "tl_id": h.tl_id, "lane": net.lanes[h.lane].id,
+                "link_indices": h.link_indices.to_vec(), "stop_line": pose(net.stop_line(h.lane)),
+            })
+        })
+        .collect();
+    let programs: Vec<Value> = net
+        .tl_ids()
+        .iter()
+        .filter_map(|id| net.tl_logic(id))
+        .map(|l| {
+            json!({
+                "id": l.id, "kind": l.kind, "program_id": l.program_id, "offset_s": l.offset_s,
+                "cycle_s": l.cycle_s(),
+                "phases": l.phases.iter().map(|p| json!({"duration_s": p.duration_s, "state": p.state}))
+                    .collect::<Vec<_>>(),
+            })
+        })
+        .collect();
+    let b = net.bounds();
+    let out = json!({
+        "path": path.display().to_string(),
+        "bounds": [b.min.x, b.min.y, b.max.x, b.max.y],
+        "lanes": lanes, "junctions": junctions, "signal_heads": heads, "programs": programs,
+    });
+    Ok(out.to_string())
+}
+
+/// The lane nearest to a world point, as a scenario place: `(lane id, s, distance)`, or `None`
+/// when no lane lies within `max_dist_m`. `vclass` (a SUMO class, e.g. "passenger",
+/// "pedestrian") keeps only lanes that allow it; internal (junction) lanes are skipped unless
+/// `internal` is set.
+#[pyfunction]
+#[pyo3(signature = (map, x, y, max_dist_m=10.0, vclass=None, internal=false, sumo_home=None))]
+#[allow(clippy::too_many_arguments)]
+pub fn snap_to_lane(
+    py: Python<'_>,
+    map: &str,
+    x: f64,
+    y: f64,
+    max_dist_m: f64,
+    vclass: Option<&str>,
+    internal: bool,
+    sumo_home: Option<PathBuf>,
+) -> PyResult<Option<(String, f64, f64)>> {
+    let (_, net) = load_map(py, map, sumo_home.as_deref())?;
+    let class = match vclass {
+        None => None,
+        Some(v) => Some(dh_env::map::VClass::from_sumo(v).ok_or_else(|| {
+            err(
+                py,
+                dh_env::Error::config("vclass", v, "not a SUMO vehicle class (e.g. passenger, pedestrian)"),
+            )
+        })?),
+    };
+    let p = Vec2 { x, y };
+    if !p.is_finite() {
+        return Err(err(py, dh_env::Error::config("point", format!("({x}, {y})"), "must be finite")));
+    }
+    let mut best: Option<(usize, f64, f64)> = None;
+    for (i, lane) in net.lanes.iter().enumerate() {
+        if class.is_some_and(|c| !lane.allow.contains(c)) {
+            continue;
+        }
+        if !internal && net.edges[lane.edge].function == EdgeFunction::Internal {
+            continue;
+        }
+        if let Some(pr) = lane.shape.project(p) {
+            if pr.distance <= max_dist_m && best.is_none_or(|b| pr.distance < b.2) {
+                best = Some((i, pr.s, pr.distance));
+            }
+        }
+    }
+    Ok(best.map(|(i, s, d)| (net.lanes[i].id.clone(), s, d)))
+}
+
+fn trigger_json(t: &Trigger, names: &[String]) -> Value {
+    match t {
+        Trigger::Time(s) => json!({"kind": "time", "time_s": s}),
+        Trigger::EgoWithin { radius_m, point } => {
+            json!({"kind": "ego_distance", "radius_m": radius_m, "point": pt(*point)})
+        }
+        Trigger::EgoEta { eta_s, point, route_s } => {
+            json!({"kind": "ego_eta", "eta_s": eta_s, "point": pt(*point), "route_s": route_s})
+        }
+        Trigger::After { actor, event, delay_s } => json!({
+            "kind": "after", "actor": names.get(*actor), "event": format!("{event:?}").to_lowercase(),
+            "delay_s": delay_s,
+        }),
+    }
+}
+
+fn scenario_json(s: &ResolvedScenario) -> Value {
+    let names: Vec<String> = s.actors.iter().map(|a| a.name.clone()).collect();
+    let actors: Vec<Value> = s
+        .actors
+        .iter()
+        .map(|a| {
+            let motion = match &a.motion {
+                ActorMotion::Static { pose: p } => json!({"kind": "static", "pose": pose(*p)}),
+                ActorMotion::External { pose: p } => json!({"kind": "external", "pose": pose(*p)}),
+                ActorMotion::Scripted(sp) => json!({
+                    "kind": "scripted",
+                    "path": sp.path.points().iter().map(|&p| pt(p)).collect::<Vec<_>>(),
+                    "length_m": sp.path.length(),
+                    "legs": sp.legs,
+                    "trigger": trigger_json(&sp.trigger, &names),
+                    "start": pose(Pose::new(sp.path.point_at(0.0), sp.path.heading_at(0.0))),
+                }),
+            };
+            json!({
+                "name": a.name, "kind": a.kind, "length_m": a.length_m, "width_m": a.width_m,
+                "color": a.color, "motion": motion,
+            })
+        })
+        .collect();
+    json!({
+        "summary": Summary::of(s),
+        "scenario_duration_s": s.scenario_duration_s(),
+        "ego": {
+            "start": pose(s.ego.start),
+            "start_lane": s.map.lanes[s.ego.start_lane].id,
+            "destination": pt(s.ego.destination),
+            "route": s.ego.route.points().iter().map(|&p| pt(p)).collect::<Vec<_>>(),
+            "length_m": s.ego.params.length_m,
+            "width_m": s.ego.params.width_m,
+        },
+        "actors": actors,
+    })
+}
+
+/// Validates scenario text as if it were the file at `path` (relative map paths and error
+/// messages refer to `path`, which need not exist) and returns its resolved geometry as JSON:
+/// the `validate` summary, the ego's start, destination and route, and every actor's path and
+/// trigger. Errors are raised as `scenario validate` prints them.
+#[pyfunction]
+#[pyo3(signature = (path, text, sumo_home=None))]
+pub fn scenario_geometry(
+    py: Python<'_>,
+    path: &str,
+    text: &str,
+    sumo_home: Option<PathBuf>,
+) -> PyResult<String> {
+    let opts = LoadOptions { sumo_home, cache: Some(map_cache()) };
+    let s = py.detach(|| resolve_text(Path::new(path), text, &opts)).map_err(|e| err(py, e))?;
+    Ok(scenario_json(&s).to_string())
+}
+
+/// Parses and resolves scenario text standing for the file at `path` (what `Scenario::load_with`
+/// does after reading the file).
+pub(crate) fn resolve_text(path: &Path, text: &str, opts: &LoadOptions) -> dh_env::Result<ResolvedScenario> {
+    let spec = parse_scenario_str(path, text)?;
+    dh_env::scenario::resolve::resolve(path, &spec, opts)
+        .map_err(|e| dh_env::scenario::parse::locate(e, path, text))
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(map_geometry, m)?)?;
+    m.add_function(wrap_pyfunction!(snap_to_lane, m)?)?;
+    m.add_function(wrap_pyfunction!(scenario_geometry, m)?)?;
+    Ok(())
+}

@@ -1,0 +1,290 @@
+"""Server-level tests of the scenario editor: security checks, the API over `_core`, save/load."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+SUITE = REPO / "scenarios" / "r4"
+BASE = "http://127.0.0.1:8765"
+ORIGIN = {"Origin": BASE}
+PED = "01_pedestrian/town01_01_midblock_crossing.toml"
+
+
+# -- security ---------------------------------------------------------------------------------
+def test_foreign_host_is_refused(client) -> None:
+    assert client.get("/api/info").status_code == 200
+    assert client.get("/api/info", headers={"Host": "localhost:8765"}).status_code == 200
+    for host in ("evil.example:8765", "rebind.attacker.test", "127.0.0.1.evil.test:8765"):
+        r = client.get("/api/info", headers={"Host": host})
+        assert r.status_code == 403 and "foreign Host" in r.text, host
+    r = client.post("/api/save", json={}, headers={"Host": "evil.example", "Origin": "http://evil.example"})
+    assert r.status_code == 403
+
+
+def test_foreign_origin_is_refused(client) -> None:
+    r = client.get("/api/info", headers={"Origin": "http://evil.example"})
+    assert r.status_code == 403 and "foreign Origin" in r.text
+    text = (client.app.state.editor.root / PED).read_text(encoding="utf-8")
+    r = client.post("/api/save", json={"path": PED, "text": text}, headers={"Origin": "http://evil.example"})
+    assert r.status_code == 403
+    # Same host, other port: another origin.
+    r = client.post("/api/save", json={"path": PED, "text": text}, headers={"Origin": "http://127.0.0.1:9"})
+    assert r.status_code == 403
+
+
+def test_post_without_origin_is_refused(client) -> None:
+    r = client.post("/api/validate", json={"path": PED, "text": ""})
+    assert r.status_code == 403 and "Origin" in r.text
+    r = client.post(
+        "/api/validate", json={"path": PED, "text": ""}, headers={**ORIGIN, "Sec-Fetch-Site": "cross-site"}
+    )
+    assert r.status_code == 403
+
+
+def test_oversized_body_is_refused(client) -> None:
+    big = "#" * 300_000
+    r = client.post("/api/validate", json={"path": PED, "text": big}, headers=ORIGIN)
+    assert r.status_code == 413
+
+
+@pytest.mark.parametrize(
+    ("path", "why"),
+    [
+        ("../evil.toml", "`..`"),
+        ("01_pedestrian/../../evil.toml", "`..`"),
+        ("/tmp/evil.toml", "absolute"),
+        ("01_pedestrian/x.py", "*.toml"),
+        ("out/x.toml", "symlink"),
+    ],
+)
+def test_paths_outside_the_root_are_refused(
+    client, workspace: Path, tmp_path: Path, path: str, why: str
+) -> None:
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (workspace / "r4" / "out").symlink_to(outside)
+    text = (workspace / "r4" / PED).read_text(encoding="utf-8")
+    r = client.post("/api/save", json={"path": path, "text": text}, headers=ORIGIN)
+    assert r.status_code == 403, r.text
+    assert why in r.json()["error"]
+    assert not list(outside.iterdir())
+    assert not (tmp_path / "evil.toml").exists()
+    r = client.get("/api/file", params={"path": path})
+    assert r.status_code == 403
+
+
+def test_symlinked_file_out_is_refused(client, workspace: Path, tmp_path: Path) -> None:
+    target = tmp_path / "victim.toml"
+    target.write_text("x = 1\n", encoding="utf-8")
+    (workspace / "r4" / "link.toml").symlink_to(target)
+    r = client.get("/api/file", params={"path": "link.toml"})
+    assert r.status_code == 403 and "symlink" in r.json()["error"]
+
+
+# -- the API over _core -------------------------------------------------------------------------
+def test_load_gives_the_worlds_geometry(client) -> None:
+    r = client.get("/api/file", params={"path": PED})
+    d = r.json()
+    assert r.status_code == 200 and d["ok"], d
+    geo = d["geometry"]
+    assert geo["summary"]["id"] == "town01_01_midblock_crossing"
+    assert geo["summary"]["route_length_m"] == pytest.approx(230.0)
+    assert geo["summary"]["reference_duration_s"] == 33.0
+    assert geo["ego"]["start_lane"] == "C2T_1"
+    assert len(geo["ego"]["route"]) >= 2
+    ped = geo["actors"][0]
+    assert ped["kind"] == "pedestrian" and ped["motion"]["trigger"]["kind"] == "ego_eta"
+
+
+def test_map_geometry_and_snap(client) -> None:
+    r = client.get("/api/map", params={"map": "../../maps/town01/town01.net.xml", "path": PED})
+    g = r.json()
+    assert r.status_code == 200, g
+    lane = next(ln for ln in g["lanes"] if ln["id"] == "C2T_1")
+    assert lane["drivable"] and len(lane["shape"]) >= 2
+    assert g["signal_heads"] and g["programs"][0]["phases"]
+    # The builtin map (the editor's --map) is the same network.
+    assert len(client.get("/api/map").json()["lanes"]) == len(g["lanes"])
+    x, y = lane["shape"][0]
+    r = client.post(
+        "/api/snap",
+        json={"path": PED, "map": "builtin:town01", "x": x + 20, "y": y + 0.3, "vclass": "passenger"},
+        headers=ORIGIN,
+    )
+    assert r.json()["lane"] == "C2T_1" and r.json()["s"] == pytest.approx(20.0, abs=0.1)
+    r = client.post(
+        "/api/snap", json={"path": PED, "map": "builtin:town01", "x": 1e6, "y": 0}, headers=ORIGIN
+    )
+    assert r.json()["lane"] is None
+
+
+def test_invalid_edit_names_the_field(client) -> None:
+    text = client.get("/api/file", params={"path": PED}).json()["text"]
+    r = client.post(
+        "/api/edit",
+        json={"path": PED, "text": text, "edits": [{"path": ["actors", 0, "speed_mps"], "value": -1.0}]},
+        headers=ORIGIN,
+    )
+    d = r.json()
+    assert d["ok"] is False
+    err = d["error"]
+    assert err["field"] == "actors[0].speed_mps" and err["value"] == "-1"
+    assert err["line"] == 19 and "must be" in err["reason"]
+    assert err["message"].startswith(f"{PED}:19:")
+    # Nothing invalid is saved.
+    r = client.post("/api/save", json={"path": PED, "text": d["text"]}, headers=ORIGIN)
+    assert r.status_code == 422 and r.json()["saved"] is False
+    assert client.get("/api/file", params={"path": PED}).json()["text"] == text
+
+
+def test_one_edit_gives_a_minimal_diff(client, workspace: Path) -> None:
+    before = (workspace / "r4" / PED).read_text(encoding="utf-8")
+    r = client.post(
+        "/api/edit",
+        json={
+            "path": PED,
+            "text": before,
+            "edits": [{"path": ["actors", 0, "start", "ego_eta_s"], "value": 3.4}],
+        },
+        headers=ORIGIN,
+    )
+    d = r.json()
+    assert d["ok"], d
+    r = client.post("/api/save", json={"path": PED, "text": d["text"]}, headers=ORIGIN)
+    assert r.json()["saved"]
+    after = (workspace / "r4" / PED).read_text(encoding="utf-8")
+    changed = [(a, b) for a, b in zip(before.splitlines(), after.splitlines(), strict=True) if a != b]
+    assert changed == [
+        (
+            'start = { ego_eta_s = 2.9, of = { lane = "C2T_1", s = 140.0 } }',
+            'start = { ego_eta_s = 3.4, of = { lane = "C2T_1", s = 140.0 } }',
+        )
+    ]
+
+
+def test_unchanged_save_is_byte_identical_for_the_whole_suite(tmp_path: Path) -> None:
+    """Every suite file read through the API and saved back unchanged keeps its bytes; so does a
+    tomlkit parse + dump (what every edit goes through)."""
+    import shutil
+
+    import tomlkit
+    from starlette.testclient import TestClient
+
+    from drivehierarchy.editor import create_app
+
+    root = tmp_path / "scenarios"
+    shutil.copytree(SUITE.parent, root, symlinks=True, ignore=shutil.ignore_patterns("*.net.xml*"))
+    # The maps are read-only for the editor: link them back.
+    for d in (SUITE.parent / "maps").iterdir():
+        if d.is_dir():
+            shutil.rmtree(root / "maps" / d.name)
+            (root / "maps" / d.name).symlink_to(d)
+    paths = sorted((root / "r4").glob("*/*.toml"))
+    assert len(paths) == 100
+    originals = {p: p.read_bytes() for p in paths}
+    with TestClient(create_app(root / "r4", precompute=False), base_url=BASE) as client:
+        for p in paths:
+            rel = p.relative_to(root / "r4").as_posix()
+            d = client.get("/api/file", params={"path": rel}).json()
+            assert d["ok"], (rel, d.get("error"))
+            assert tomlkit.dumps(tomlkit.parse(d["text"])) == d["text"], rel
+            r = client.post("/api/edit", json={"path": rel, "text": d["text"], "edits": []}, headers=ORIGIN)
+            r = client.post("/api/save", json={"path": rel, "text": r.json()["text"]}, headers=ORIGIN)
+            assert r.json()["saved"], rel
+    for p, data in originals.items():
+        assert p.read_bytes() == data, p
+
+
+def test_scene_frames_run_and_probe(client) -> None:
+    text = client.get("/api/file", params={"path": PED}).json()["text"]
+    body = {"path": PED, "text": text}
+    s0 = client.post("/api/scene", json={**body, "time_s": 0}, headers=ORIGIN).json()
+    s10 = client.post("/api/scene", json={**body, "time_s": 10}, headers=ORIGIN).json()
+    assert s10["time_s"] == pytest.approx(10.0, abs=0.26) and s10["ego"]["x"] > s0["ego"]["x"] + 20
+    assert {a["id"] for a in s0["actors"]} == {1, 2}
+    r = client.post("/api/frame", json={**body, "time_s": 10, "view": "front"}, headers=ORIGIN)
+    assert r.status_code == 200 and r.content[:8] == b"\x89PNG\r\n\x1a\n"
+    run = client.post("/api/run", json={**body, "driver": "expert"}, headers=ORIGIN).json()
+    assert run["score"]["termination_reason"] == "destination_reached"
+    assert run["states"][-1]["time_s"] > 20
+    probe = client.post("/api/probe", json=body, headers=ORIGIN).json()["probe"]
+    assert [p["cell"] for p in probe] == ["expert", "late_expert", "follower@8", "lights@8"]
+    scores = {p["cell"]: p["score"] for p in probe}
+    assert scores["expert"] > 80 > scores["follower@8"]
+
+
+def test_save_as_from_a_category_template(client, workspace: Path) -> None:
+    r = client.post("/api/new", json={"id": "my_crossing", "category": "01_pedestrian"}, headers=ORIGIN)
+    d = r.json()
+    assert d["ok"], d
+    assert d["path"] == "01_pedestrian/my_crossing.toml"
+    assert 'id = "my_crossing"' in d["text"] and 'map = "builtin:town01"' in d["text"]
+    r = client.post("/api/save", json={"path": d["path"], "text": d["text"], "create": True}, headers=ORIGIN)
+    assert r.json()["saved"]
+    assert (workspace / "r4" / d["path"]).read_text(encoding="utf-8") == d["text"]
+    r = client.post("/api/save", json={"path": d["path"], "text": d["text"], "create": True}, headers=ORIGIN)
+    assert r.status_code == 400 and "exists" in r.json()["error"]
+
+
+def test_page_and_assets_are_served(client) -> None:
+    r = client.get("/")
+    assert r.status_code == 200 and "<canvas" in r.text
+    assert "http" not in r.text.replace(BASE, "").split("<body")[0].lower().replace("http-equiv", "")
+    assert client.get("/static/editor.js").status_code == 200
+    assert json.loads(client.get("/api/info").text)["categories"][0] == "01_pedestrian"
+
+
+def test_precomputed_frames_equal_rendered_ones(workspace: Path) -> None:
+    """The background worker drives the previewed buffer to its end and renders every decision's
+    frames; a cached frame is the bytes an on-demand render gives."""
+    import threading
+
+    from drivehierarchy.editor.app import Editor
+    from drivehierarchy.editor.scene import ScenePlayer
+
+    ed = Editor(workspace / "r4")
+    path = str(workspace / "r4" / PED)
+    text = Path(path).read_text(encoding="utf-8")
+    player = ed.players.get(path, text)
+    stop = threading.Event()
+    steps = 0
+    while player.precompute_step():
+        steps += 1
+    assert player.done and len(player.frames) == 2 * len(player.states)
+    stop.set()
+    fresh = ScenePlayer(path, text)
+    try:
+        for t in (0.0, 7.3, 19.0):
+            for view in ("front", "bev"):
+                cached, time_s = player.png_at(t, view)
+                assert (cached, time_s) == fresh.png_at(t, view)
+    finally:
+        fresh.close()
+        ed.players.close()
+
+
+def test_sumo_maps_are_drawn_and_snapped(client) -> None:
+    """`sumo:` maps (under the installed SUMO) work like project maps."""
+    spec = "sumo:tools/game/A10KW/osm.net.xml"
+    r = client.get("/api/map", params={"map": spec})
+    if r.status_code == 400 and "SUMO" in r.json().get("error", ""):
+        pytest.skip("no SUMO_HOME in this environment")
+    g = r.json()
+    assert r.status_code == 200 and len(g["lanes"]) > 50, g.get("error")
+    lane = next(
+        ln for ln in g["lanes"] if ln["drivable"] and ln["function"] == "normal" and ln["length_m"] > 20
+    )
+    x, y = lane["shape"][0]
+    (x1, y1) = lane["shape"][1]
+    f = 5.0 / max(1e-9, ((x1 - x) ** 2 + (y1 - y) ** 2) ** 0.5)
+    r = client.post(
+        "/api/snap",
+        json={"path": PED, "map": spec, "x": x + f * (x1 - x), "y": y + f * (y1 - y), "vclass": "passenger"},
+        headers=ORIGIN,
+    )
+    hit = r.json()
+    assert hit["lane"] is not None and hit["distance_m"] < 1.0
