@@ -16,9 +16,15 @@
 //!   acceleration and steer-rate bounds, braked into at a comfortable deceleration; no
 //!   acceleration while the wheel is still turned), stops before actors in or predicted into the
 //!   route corridor (unless the ego clears the spot well before they arrive), stops before red /
-//!   yellow lights on the route, and a time-headway law behind a lead vehicle.
+//!   yellow lights on the route, and a time-headway law behind a lead vehicle. Actors are
+//!   extrapolated on straight lines, except vehicles coming up from behind or beside the ego,
+//!   which follow their lane when a lane-following predictor is given (a straight line would
+//!   cut them across every bend of the route and hold the ego in a stream of traffic); one
+//!   still wholly behind the ego is not braked for when it could only reach the corridor beside
+//!   or behind the ego's front.
 //! * Stall guard: the protocol ends an episode after 5 s below 1 km/h, so when held at rest by a
-//!   light or a standing actor the expert creeps a few centimetres every few seconds.
+//!   light, a standing actor or a crawling lead the expert creeps a few centimetres every few
+//!   seconds.
 //! * Optional local planner: with a drivable-area oracle, a static obstacle blocking the route is
 //!   passed by offsetting the pursuit path laterally into free same-direction drivable space.
 //!
@@ -248,6 +254,10 @@ pub struct ExpertInput<'a> {
     /// junction. Enables the local planner that passes static obstacles (never through
     /// oncoming lanes); without it the expert stops before them. See [`network_drivable`].
     pub drivable: Option<&'a dyn Fn(Vec2, f64) -> bool>,
+    /// Optional lane-following predictor: `follow_lane(pos, yaw, d)` is the pose `d` metres on
+    /// along the lane a vehicle at `pos` heading `yaw` is following, or `None` when it follows
+    /// none (it is then predicted on a straight line). See [`network_lane_follower`].
+    pub follow_lane: Option<&'a dyn Fn(Vec2, f64, f64) -> Option<Pose>>,
 }
 
 impl std::fmt::Debug for ExpertInput<'_> {
@@ -259,6 +269,7 @@ impl std::fmt::Debug for ExpertInput<'_> {
             .field("lights", &self.lights.len())
             .field("speed_limit_mps", &self.speed_limit_mps)
             .field("drivable", &self.drivable.is_some())
+            .field("follow_lane", &self.follow_lane.is_some())
             .finish()
     }
 }
@@ -871,12 +882,23 @@ impl Expert {
                 continue;
             }
             let moving = a.speed_mps.abs() > 0.2;
+            let is_vehicle = !a.kind.is_static() && a.kind != ActorKind::Pedestrian;
             let fwd = Vec2::from_angle(a.pose.yaw);
+            let behind = is_vehicle && moving && self.coming_up_behind(route, a, s_lo, s_hi, s_front);
             let last = if moving { steps } else { 0 };
             for k in 0..=last {
                 let t = k as f64 * p.prediction_step_s;
                 let mut fp = a.footprint();
-                fp.pose.pos += fwd * (a.speed_mps * t);
+                // A vehicle coming up from behind or beside us along a lane is predicted along
+                // it: a straight line would make one in the next lane cut across every bend of
+                // our route and stop us for good in a stream of traffic. Others go straight.
+                match input.follow_lane.filter(|_| k > 0 && behind) {
+                    Some(follow) => match follow(a.pose.pos, a.pose.yaw, a.speed_mps * t) {
+                        Some(pose) => fp.pose = pose,
+                        None => fp.pose.pos += fwd * (a.speed_mps * t),
+                    },
+                    None => fp.pose.pos += fwd * (a.speed_mps * t),
+                }
                 let Some(s_hit) = self.corridor_hit(route, &fp.corners(), s_lo, s_hi, half_ego) else {
                     continue;
                 };
@@ -884,6 +906,19 @@ impl Expert {
                     continue; // beside or behind the ego: not ours to stop for
                 }
                 let d = (s_hit - s_front).max(0.0);
+                if k > 0
+                    && s_hit < s_front
+                    && behind
+                    && self.detour.is_none()
+                    && self.right_behind(route, a, s_lo, s_hi, s_front - ego.length_m, half_ego)
+                {
+                    // A vehicle coming up right behind us in our lane (its front behind our rear),
+                    // predicted to reach our corridor only beside or behind our front: braking
+                    // cannot avoid that (the ego would only stay there longer); it has to keep
+                    // its distance. Not while passing an obstacle (then the ego is the one
+                    // changing lanes), nor for one in another lane (a merge: the ego yields).
+                    continue;
+                }
                 if k > 0 {
                     let v_max = p.cruise_speed_mps.max(v);
                     let t_acc = ((v_max - v) / p.arrival_accel_mps2).max(0.0);
@@ -907,7 +942,6 @@ impl Expert {
                     }
                 }
                 let along = wrap_angle(a.pose.yaw - route_heading(route, s_hit.max(s_front)));
-                let is_vehicle = !a.kind.is_static() && a.kind != ActorKind::Pedestrian;
                 let v_along = a.speed_mps * along.cos();
                 if is_vehicle && along.abs() < 0.8 && v_along > 0.5 {
                     // Lead vehicle: gap from its current rear to our front.
@@ -922,12 +956,13 @@ impl Expert {
                             if p.time_headway_s > 0.0 { free / p.time_headway_s } else { f64::INFINITY };
                         by_brake.min(by_headway.max(v_along.min(free)))
                     };
-                    // Expressed as a stop point reached at speed v_follow right now.
+                    // Expressed as a stop point reached at speed v_follow right now. Queued
+                    // close behind a crawling lead, the ego may creep up to it.
                     out.push(StopPoint {
                         s_stop: s_front + v * p.decision_period_s,
                         v_at: v_follow,
                         reason: SpeedReason::Lead { actor_id: a.id },
-                        creep_limit: None,
+                        creep_limit: Some(s_now - a.length_m * 0.5 - p.creep_min_gap_m),
                     });
                 } else {
                     if k == 0 && !moving {
@@ -973,6 +1008,30 @@ impl Expert {
             }
         }
         out
+    }
+
+    /// A vehicle driving our way whose centre is behind our front.
+    fn coming_up_behind(&self, route: &Polyline, a: &ActorView, s_lo: f64, s_hi: f64, s_front: f64) -> bool {
+        a.speed_mps > 0.0
+            && project_window(route, a.pose.pos, s_lo, s_hi).is_some_and(|pr| {
+                pr.s < s_front && wrap_angle(a.pose.yaw - route_heading(route, pr.s)).abs() < 0.8
+            })
+    }
+
+    /// The front of vehicle `a` is behind arc `s_rear` and its centre within the corridor
+    /// (half width `half_ego` plus its own half width) of the route.
+    fn right_behind(
+        &self,
+        route: &Polyline,
+        a: &ActorView,
+        s_lo: f64,
+        s_hi: f64,
+        s_rear: f64,
+        half_ego: f64,
+    ) -> bool {
+        project_window(route, a.pose.pos, s_lo - a.length_m, s_hi).is_some_and(|pr| {
+            pr.s + a.length_m * 0.5 < s_rear && pr.lateral.abs() < half_ego + a.width_m * 0.5
+        })
     }
 
     /// A signal head on the route within 5 m before to 40 m after arc `s` (a standing vehicle
@@ -1192,6 +1251,39 @@ pub fn network_drivable(net: &Network) -> impl Fn(Vec2, f64) -> bool + '_ {
     }
 }
 
+/// A vehicle counts as following a lane when it is within this distance of the lane's
+/// centreline and heads along it within this angle (a lane change or a turn does not).
+const FOLLOW_MAX_OFFSET_M: f64 = 1.0;
+const FOLLOW_MAX_RAD: f64 = 0.1;
+
+/// The lane-following predictor of a road network for [`ExpertInput::follow_lane`]: the lane
+/// containing the point whose direction best matches the heading (within `FOLLOW_MAX_RAD`),
+/// followed `d` metres on, straight on past its end.
+pub fn network_lane_follower(net: &Network) -> impl Fn(Vec2, f64, f64) -> Option<Pose> + '_ {
+    move |p: Vec2, yaw: f64, d: f64| {
+        let mut lanes: SmallVec<[LaneIdx; 8]> = SmallVec::new();
+        net.drivable().lanes_at(p, &mut lanes);
+        let mut best: Option<(f64, LaneIdx, f64)> = None;
+        for &l in &lanes {
+            let shape = &net.lanes[l].shape;
+            let Some(pr) = shape.project(p) else { continue };
+            let dh = wrap_angle(shape.heading_at(pr.s) - yaw).abs();
+            if pr.distance < FOLLOW_MAX_OFFSET_M && dh < FOLLOW_MAX_RAD && best.is_none_or(|b| dh < b.0) {
+                best = Some((dh, l, pr.s));
+            }
+        }
+        let (_, l, s) = best?;
+        let shape = &net.lanes[l].shape;
+        let (len, s1) = (shape.length(), s + d);
+        if s1 <= len {
+            Some(Pose::new(shape.point_at(s1), shape.heading_at(s1)))
+        } else {
+            let h = shape.heading_at(len);
+            Some(Pose::new(shape.point_at(len) + Vec2::from_angle(h) * (s1 - len), h))
+        }
+    }
+}
+
 /// Speed limit of the drivable lane nearest to `p` (within 3 m), m/s.
 pub fn network_speed_limit(net: &Network, p: Vec2) -> Option<f64> {
     net.drivable().nearest_lane(p, 3.0).map(|(l, _)| net.lanes[l].speed_mps)
@@ -1218,6 +1310,7 @@ impl Expert {
         let net = world.map();
         let ego = *world.ego();
         let oracle = network_drivable(net);
+        let follower = network_lane_follower(net);
         let input = ExpertInput {
             ego: &ego,
             route,
@@ -1225,6 +1318,7 @@ impl Expert {
             lights: world.lights(),
             speed_limit_mps: network_speed_limit(net, ego.pose.pos),
             drivable: Some(&oracle),
+            follow_lane: Some(&follower),
         };
         self.act(&input)
     }

@@ -230,6 +230,7 @@ fn forced_red_at_the_signalised_crossing_holds_the_ego() {
                 lights: &lights,
                 speed_limit_mps: network_speed_limit(&net, ego.pose.pos),
                 drivable: Some(&oracle),
+                follow_lane: None,
             };
             let a = expert.act(&input);
             light_decisions += u32::from(a.reason == SpeedReason::Light);

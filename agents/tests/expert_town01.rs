@@ -80,3 +80,42 @@ fn drivable_oracle_rejects_oncoming_lanes() {
     assert!(!oracle(walk.shape.point_at(s), walk.shape.heading_at(s)), "sidewalk");
     assert!(!oracle(dh_env::geom::Vec2::new(-5000.0, -5000.0), 0.0));
 }
+
+#[test]
+fn lane_follower_follows_the_lane_and_only_a_vehicle_along_it() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/maps/town01/town01.net.xml");
+    if !path.exists() {
+        eprintln!("skipping: {} not found", path.display());
+        return;
+    }
+    let net = Network::from_file(&path).unwrap();
+    let follow = dh_agents::expert::network_lane_follower(&net);
+    // Every drivable lane longer than 30 m: 10 m on from its middle along its own shape (on the
+    // curved road not on the tangent), and past its end straight on along its last heading.
+    let mut checked = 0;
+    for l in
+        (0..net.lanes.len()).filter(|&l| net.lanes[l].shape.length() > 30.0 && net.lanes[l].is_drivable())
+    {
+        let shape = &net.lanes[l].shape;
+        let len = shape.length();
+        let s = len * 0.5 - 5.0;
+        let (p, h) = (shape.point_at(s), shape.heading_at(s));
+        let got = follow(p, h, 10.0).unwrap();
+        let want = shape.point_at(s + 10.0);
+        assert!(got.pos.dist(want) < 1e-6, "lane {}: {:?} != {want:?}", net.lanes[l].id, got.pos);
+        assert!((got.yaw - shape.heading_at(s + 10.0)).abs() < 1e-9);
+        let end = follow(p, h, len - s + 7.0).unwrap();
+        let want = shape.point_at(len) + dh_env::geom::Vec2::from_angle(shape.heading_at(len)) * 7.0;
+        assert!(
+            end.pos.dist(want) < 1e-6,
+            "lane {}: past the end {:?} != {want:?}",
+            net.lanes[l].id,
+            end.pos
+        );
+        // Turned across the lane or off its centreline: not following it.
+        assert!(follow(p, h + 0.5, 10.0).is_none_or(|q| q.pos.dist(got.pos) > 1e-6));
+        checked += 1;
+    }
+    assert!(checked > 20, "only {checked} lanes checked");
+    assert!(follow(dh_env::geom::Vec2::new(-5000.0, -5000.0), 0.0, 10.0).is_none());
+}

@@ -16,7 +16,15 @@ fn decide(
     lights: &[TrafficLightView],
 ) -> dh_agents::expert::ExpertAction {
     let mut ex = Expert::new(ExpertParams::default()).unwrap();
-    ex.act(&ExpertInput { ego, route, actors, lights, speed_limit_mps: None, drivable: None })
+    ex.act(&ExpertInput {
+        ego,
+        route,
+        actors,
+        lights,
+        speed_limit_mps: None,
+        drivable: None,
+        follow_lane: None,
+    })
 }
 
 fn straight() -> Polyline {
@@ -44,6 +52,7 @@ fn speed_limit_caps_the_target() {
         lights: &[],
         speed_limit_mps: Some(8.33),
         drivable: None,
+        follow_lane: None,
     });
     assert_eq!(a.target_speed_mps, 8.33);
     assert_eq!(a.reason, SpeedReason::SpeedLimit);
@@ -78,6 +87,7 @@ fn steer_respects_the_bridge_rate_limit() {
         lights: &[],
         speed_limit_mps: None,
         drivable: None,
+        follow_lane: None,
     };
     let a1 = ex.act(&input);
     let a2 = ex.act(&input);

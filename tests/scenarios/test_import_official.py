@@ -326,7 +326,14 @@ def test_official_scenes_run_to_a_termination_and_the_expert_completes(
     imported: tuple[Path, dict], tmp_path: Path
 ) -> None:
     """Each imported scene runs with its SUMO traffic to a termination; the expert reaches the
-    destination in at least 10 of the 13 (issue 9; measured 10: see docs/importing.md)."""
+    destination in every scene but GNGY (see docs/importing.md).
+
+    GNGY cannot be finished by any driver: its ego lane `-68_0` is link 1 of light `559` in
+    tongji.net.xml, whose static program (offset 0) is red for that link for the first 48 s
+    (phases `gr` 42 s, `yr` 3 s, `rr` 3 s), while its scenario timeout is 2 × 24.59 s = 49.2 s.
+    The original release holds no other light setting that the importer could carry: the
+    editor's `customizedParams.trafficLight` is `[]` in all 13 `entity.json` files and
+    `entity_sumo.json` has no light field (`test_official_scenes_hold_no_light_settings`)."""
     pytest.importorskip("libsumo")
     from drivehierarchy.benchmark.r4 import runner
 
@@ -337,8 +344,21 @@ def test_official_scenes_run_to_a_termination_and_the_expert_completes(
     assert len(results) == len(report["scenes"])
     reasons = {r["key"]: r["score"]["termination_reason"] for r in results}
     assert all(reasons.values()), reasons
-    completed = sum(v == "destination_reached" for v in reasons.values())
-    assert completed >= 10, reasons
+    missed = sorted(k for k, v in reasons.items() if v != "destination_reached")
+    assert len(missed) <= 1 and all("GNGY" in k for k in missed), reasons
+
+
+def test_official_scenes_hold_no_light_settings(official_dir: Path, require_official: Any) -> None:
+    """The evidence behind GNGY's expected miss above: no scene of the original release sets
+    its lights, so the network's static programs (offset 0) are all there is to import."""
+    scenes = require_official(official_dir / CLOSE_LOOP / "Scenario_Onsite", "official scenes")
+    editors = sorted(scenes.glob("*/*/entity.json"))
+    assert len(editors) >= 13
+    for f in editors:
+        params = json.loads(json.loads(f.read_text(encoding="utf-8"))["customizedParams"])
+        assert params["trafficLight"] == [], f
+        sumo = json.loads((f.parent / "entity_sumo.json").read_text(encoding="utf-8"))
+        assert not [k for k in sumo if "light" in k.lower() or "tls" in k.lower()], f
 
 
 def test_import_is_deterministic(tmp_path: Path) -> None:

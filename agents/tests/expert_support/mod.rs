@@ -211,6 +211,7 @@ impl Sim {
                     lights: &lights,
                     speed_limit_mps: self.speed_limit,
                     drivable,
+                    follow_lane: None,
                 };
                 let act = expert.act(&input);
                 assert!(act.steer.is_finite() && act.target_speed_mps.is_finite());
