@@ -7,6 +7,7 @@ all 100 scenarios (state-only, in worker processes) and checks the must-holds, t
 
 from __future__ import annotations
 
+import json
 import tomllib
 from collections import Counter
 from pathlib import Path
@@ -18,18 +19,8 @@ from drivehierarchy.scenarios import builtin_root, sumo_home
 
 SUITE = builtin_root() / "r4"
 DOC = Path(__file__).resolve().parents[2] / "docs" / "suite.md"
-CATEGORIES = [
-    "01_pedestrian",
-    "02_obstacles",
-    "03_turning",
-    "04_intersection",
-    "05_t_intersection",
-    "06_traffic_flow",
-    "07_sudden_brake",
-    "08_merging",
-    "09_yielding",
-    "10_roundabout",
-]
+# The protocol's ten categories, as the Rust scenario reader defines them (its schema's enum).
+CATEGORIES = sorted(json.loads(_core.scenario_json_schema())["properties"]["category"]["enum"])
 # Real-world city networks shipped inside eclipse-sumo (OpenStreetMap / survey based). The
 # synthetic ones there (grid6, square, ...) do not count.
 REAL_WORLD_SUMO = {

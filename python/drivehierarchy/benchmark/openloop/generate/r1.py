@@ -103,10 +103,7 @@ def r1_1_a(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
                     "answer": "Yes" if vis else "No",
                     "meta_data": {
                         "category": cat,
-                        "object_ids": [str(v.actor.id) for v in vis],
-                        "distances_m": [v.distance_m for v in vis],
-                        "visible_fractions": [v.visible_fraction for v in vis],
-                        "image_size": [W, H],
+                        **_shown(vis),
                     },
                     "image_path": image_ref(f),
                     "original_Question_id": "",
@@ -135,10 +132,7 @@ def r1_1_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
                     "answer": str(len(vis)),
                     "meta_data": {
                         "category": cat,
-                        "object_ids": [str(v.actor.id) for v in vis],
-                        "distances_m": [v.distance_m for v in vis],
-                        "visible_fractions": [v.visible_fraction for v in vis],
-                        "image_size": [W, H],
+                        **_shown(vis),
                     },
                     "image_path": image_ref(f),
                     "original_Question_id": "",
@@ -149,6 +143,17 @@ def r1_1_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
             by_count.setdefault(len(vis), []).append((rec, [f]))
     chosen = quality.balance_counts(by_count, n, rng)
     return _finish([c[0] for c in chosen], "R1_1_B", [c[1] for c in chosen])
+
+
+def _shown(objs: list[Visible]) -> dict[str, Any]:
+    """The meta_data of the objects a count or existence answer rests on (ids, distances,
+    visible fractions) and the image size."""
+    return {
+        "object_ids": [str(v.actor.id) for v in objs],
+        "distances_m": [v.distance_m for v in objs],
+        "visible_fractions": [v.visible_fraction for v in objs],
+        "image_size": [W, H],
+    }
 
 
 def _nearest(f: Frame, cat: str) -> Visible | None:
@@ -309,10 +314,7 @@ def r1_2_c(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
                             "category": cat,
                             "bucket": name,
                             "bucket_range": label,
-                            "object_ids": [str(v.actor.id) for v in inside],
-                            "distances_m": [v.distance_m for v in inside],
-                            "visible_fractions": [v.visible_fraction for v in inside],
-                            "image_size": [W, H],
+                            **_shown(inside),
                         },
                         "image_path": image_ref(f),
                         "original_Question_id": "",
