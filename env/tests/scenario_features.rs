@@ -2,60 +2,26 @@
 //! lane changes (cut-ins), traffic-light overrides and per-vehicle traffic speeds — parsing,
 //! validation errors (file, TOML path, value) and runtime behaviour, and determinism.
 
+mod common;
+
+use common::{cruise, Town01Scenarios};
 use dh_env::drive::Control;
-use dh_env::scenario::{ActorMotion, ResolvedScenario, Scenario};
+use dh_env::scenario::{ActorMotion, ResolvedScenario};
 use dh_env::view::LightColor;
 use dh_env::world::idm::IdmTraffic;
 use dh_env::world::World;
 use sha2::{Digest, Sha256};
-use std::path::PathBuf;
 
-fn town01() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios/maps/town01/town01.net.xml")
-}
-
-/// Ego eastbound on C2T_1 (y = −4.8) from x ≈ 30 to x ≈ 340 at `speed` m/s, plus `body`.
-fn scenario_text(speed: f64, body: &str) -> String {
-    format!(
-        r#"version = 1
-id = "features"
-category = "01_pedestrian"
-map = {map:?}
-
-[ego]
-start = {{ lane = "C2T_1", s = 20.0 }}
-destination = {{ lane = "C2T_1", s = 330.0 }}
-speed_mps = {speed}
-{body}
-"#,
-        map = town01().display().to_string()
-    )
-}
-
-fn write(tag: &str, text: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("dh_scenario_features_{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let p = dir.join(format!("{tag}.toml"));
-    std::fs::write(&p, text).unwrap();
-    p
-}
+const FILES: Town01Scenarios = Town01Scenarios { id: "features", category: "01_pedestrian" };
 
 fn load(tag: &str, speed: f64, body: &str) -> ResolvedScenario {
-    let p = write(tag, &scenario_text(speed, body));
-    Scenario::load(&p).unwrap_or_else(|e| panic!("{tag}: {e}"))
+    FILES.load(tag, speed, body)
 }
 
 fn load_err(tag: &str, body: &str) -> String {
-    let p = write(tag, &scenario_text(8.0, body));
-    let e = Scenario::load(&p).expect_err("must fail").to_string();
+    let (p, e) = FILES.load_err(tag, body);
     assert!(e.contains(&p.display().to_string()), "error names the file: {e}");
     e
-}
-
-/// Holds the ego's speed (throttle/brake on the error), straight ahead.
-fn cruise(w: &World, v: f64) -> Control {
-    let e = v - w.ego().speed_mps;
-    Control { throttle: (0.5 * e).clamp(0.0, 1.0), brake: (-0.5 * e).clamp(0.0, 1.0), steer: 0.0 }
 }
 
 /// Runs until actor `id` is triggered; returns (time, ego x) at that tick.

@@ -3,57 +3,23 @@
 //! collision, distance, ETA or another actor's event, cut-ins paced beside the ego, brake lamps
 //! of a standing vehicle. The point of each: a hazard-blind ego meets the hazard at any speed.
 
+mod common;
+
+use common::{cruise, Town01Scenarios};
 use dh_env::drive::Control;
-use dh_env::scenario::{ResolvedScenario, Scenario};
+use dh_env::scenario::ResolvedScenario;
 use dh_env::world::World;
-use std::path::PathBuf;
 
-fn town01() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios/maps/town01/town01.net.xml")
-}
-
-/// Ego eastbound on C2T_1 (y = −4.8) from x ≈ 30 to x ≈ 340 at `speed` m/s, plus `body`.
-fn scenario_text(speed: f64, body: &str) -> String {
-    format!(
-        r#"version = 1
-id = "hazards"
-category = "07_sudden_brake"
-map = {map:?}
-
-[ego]
-start = {{ lane = "C2T_1", s = 20.0 }}
-destination = {{ lane = "C2T_1", s = 330.0 }}
-speed_mps = {speed}
-{body}
-"#,
-        map = town01().display().to_string()
-    )
-}
-
-fn write(tag: &str, text: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("dh_scenario_hazards_{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let p = dir.join(format!("{tag}.toml"));
-    std::fs::write(&p, text).unwrap();
-    p
-}
+const FILES: Town01Scenarios = Town01Scenarios { id: "hazards", category: "07_sudden_brake" };
 
 fn load(tag: &str, speed: f64, body: &str) -> ResolvedScenario {
-    let p = write(tag, &scenario_text(speed, body));
-    Scenario::load(&p).unwrap_or_else(|e| panic!("{tag}: {e}"))
+    FILES.load(tag, speed, body)
 }
 
 fn load_err(tag: &str, body: &str) -> String {
-    let p = write(tag, &scenario_text(8.0, body));
-    let e = Scenario::load(&p).expect_err("must fail").to_string();
+    let (p, e) = FILES.load_err(tag, body);
     assert!(e.starts_with(&format!("{}:", p.display())), "error names the file: {e}");
     e
-}
-
-/// Holds the ego's speed (throttle/brake on the error), straight ahead: a hazard-blind driver.
-fn cruise(w: &World, v: f64) -> Control {
-    let e = v - w.ego().speed_mps;
-    Control { throttle: (0.5 * e).clamp(0.0, 1.0), brake: (-0.5 * e).clamp(0.0, 1.0), steer: 0.0 }
 }
 
 /// Cruises blind at `v` for at most `secs`; returns the time of the first contact with `id`.
