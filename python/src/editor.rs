@@ -6,7 +6,8 @@ use crate::env::{err, map_cache};
 use dh_env::geom::{Pose, Vec2};
 use dh_env::map::{EdgeFunction, Network};
 use dh_env::scenario::{
-    parse_scenario_str, resolve_map_path, ActorMotion, LoadOptions, ResolvedScenario, Summary, Trigger,
+    parse_scenario_str, resolve_map_path, ActorMotion, LightProgram, LoadOptions, ResolvedScenario, Summary,
+    Trigger,
 };
 use pyo3::prelude::*;
 use serde_json::{json, Value};
@@ -163,6 +164,46 @@ fn trigger_json(t: &Trigger, names: &[String]) -> Value {
     }
 }
 
+/// Phases shown per light at most (a 1 s program over a long window stays drawable).
+const MAX_SCHEDULE: usize = 4000;
+
+/// Every light's program as the episode runs it (the scenario's `[[lights]]` override resolved
+/// against the map — `start_phase` turned into an offset — else the map's program) and its phases
+/// over episode time [0, `horizon_s`] as `[t0, t1, phase index]`, by the world's own
+/// `LightProgram::phase_at`: the editor draws the program over time from it.
+fn lights_json(s: &ResolvedScenario, horizon_s: f64) -> Vec<Value> {
+    s.map
+        .tl_ids()
+        .iter()
+        .filter_map(|id| {
+            let program = match s.lights.iter().find(|l| l.tl_id == *id) {
+                Some(l) => l.clone(),
+                None => {
+                    let l = s.map.tl_logic(id)?;
+                    LightProgram { tl_id: l.id.clone(), offset_s: l.offset_s, phases: l.phases.clone(), replaced: false }
+                }
+            };
+            let mut schedule = Vec::new();
+            let mut t = 0.0;
+            while t < horizon_s && schedule.len() < MAX_SCHEDULE {
+                let Some((i, left)) = program.phase_at(t) else { break };
+                // A phase's end is found again from just past it (left is 0 at a cycle's end).
+                let end = (t + left.max(1e-6)).min(horizon_s);
+                schedule.push(json!([t, end, i]));
+                t = end;
+            }
+            Some(json!({
+                "tl_id": id, "offset_s": program.offset_s,
+                "overridden": s.lights.iter().any(|l| l.tl_id == *id),
+                "cycle_s": program.phases.iter().map(|p| p.duration_s.max(0.0)).sum::<f64>(),
+                "phases": program.phases.iter().map(|p| json!({"duration_s": p.duration_s, "state": p.state}))
+                    .collect::<Vec<_>>(),
+                "schedule": schedule,
+            }))
+        })
+        .collect()
+}
+
 fn scenario_json(s: &ResolvedScenario) -> Value {
     let names: Vec<String> = s.actors.iter().map(|a| a.name.clone()).collect();
     let actors: Vec<Value> = s
@@ -199,6 +240,8 @@ fn scenario_json(s: &ResolvedScenario) -> Value {
             "width_m": s.ego.params.width_m,
         },
         "actors": actors,
+        // The episode's timeout (2 × the scenario duration) is as far as a preview can go.
+        "lights": lights_json(s, 2.0 * s.scenario_duration_s()),
     })
 }
 

@@ -19,6 +19,8 @@ REPO = Path(__file__).resolve().parents[2]
 SUITE = REPO / "scenarios" / "r4"
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 PED = "01_pedestrian/town01_01_midblock_crossing.toml"
+# Background traffic (two `[[traffic.flows]]`) through town01's light C.
+FLOWS = "04_intersection/town01_09_behind_left_turner.toml"
 
 
 def _need_browser() -> None:
@@ -38,6 +40,8 @@ def _need_browser() -> None:
 def workspace(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("e2e") / "scenarios"
     shutil.copytree(SUITE / "01_pedestrian", root / "r4" / "01_pedestrian")
+    (root / "r4" / "04_intersection").mkdir()
+    shutil.copy(SUITE / FLOWS, root / "r4" / FLOWS)
     (root / "maps").mkdir()
     (root / "maps" / "town01").symlink_to(REPO / "scenarios" / "maps" / "town01")
     return root
@@ -115,6 +119,27 @@ LANE_POINT_JS = """([lane, s]) => {
 }"""
 
 
+def set_field(page, path: str, value: str) -> None:
+    """Types into the input bound to key path `path` and commits it (the form's change event)."""
+    sel = f"[data-path='{path}']"
+    page.fill(sel, value)
+    page.press(sel, "Tab")
+    idle(page)
+
+
+def validate_cli(path: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "drivehierarchy.cli", "scenario", "validate", str(path)],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+
+
+def changed_lines(before: str, after: str) -> list[tuple[str, str]]:
+    return [(a, b) for a, b in zip(before.splitlines(), after.splitlines(), strict=True) if a != b]
+
+
 def click_lane(page, lane: str, s: float) -> None:
     x, y = page.evaluate(LANE_POINT_JS, [lane, s])
     page.mouse.click(x, y)
@@ -150,9 +175,10 @@ def test_build_a_pedestrian_crossing_from_an_empty_map(page, server: str, worksp
     page.fill("[data-path='actors.0.start.ego_eta_s']", "2.9")
     page.press("[data-path='actors.0.start.ego_eta_s']", "Tab")
     idle(page)
-    page.fill("[data-path='actors.0.start.of']", '{"lane": "C2T_1", "s": 140.0}')
-    page.press("[data-path='actors.0.start.of']", "Tab")
-    idle(page)
+    # The trigger's `of` is a place form (lane + s), prefilled 40 m ahead of the ego's start.
+    assert page.input_value("[data-path='actors.0.start.of']") == "lane"
+    set_field(page, "actors.0.start.of.lane", "C2T_1")
+    set_field(page, "actors.0.start.of.s", "140")
     assert page.is_hidden("#error-box"), page.inner_text("#error-box")
     page.fill("#saveas-path", "01_pedestrian/my_crossing.toml")
     page.click("#btn-saveas")
@@ -255,3 +281,141 @@ def test_preview_front_equals_scenario_preview_byte_for_byte(
     front = Path(r.stdout.splitlines()[0])
     assert shown[:8] == b"\x89PNG\r\n\x1a\n"
     assert shown == front.read_bytes()
+
+
+def test_edit_a_flow_row_and_save(page, server: str, workspace: Path) -> None:
+    path = workspace / "r4" / FLOWS
+    before = path.read_text(encoding="utf-8")
+    page.goto(server + "#" + FLOWS)
+    idle(page)
+    # The second flow's row: its rate and its destination edge, picked on the map.
+    assert page.input_value("[data-path='traffic.flows.1.vehs_per_hour']") == "300"
+    set_field(page, "traffic.flows.1.vehs_per_hour", "450")
+    page.click("[data-field='traffic.flows.1.to'] button.pick")
+    click_lane(page, "C2T_1", 40.0)
+    assert page.input_value("[data-path='traffic.flows.1.to']") == "C2T"
+    assert page.is_hidden("#error-box"), page.inner_text("#error-box")
+    page.click("#btn-save")
+    idle(page)
+    after = path.read_text(encoding="utf-8")
+    try:
+        assert changed_lines(before, after) == [
+            ('to = "C2N"', 'to = "C2T"'),
+            ("vehs_per_hour = 300", "vehs_per_hour = 450"),
+        ]
+        r = validate_cli(path)
+        assert r.returncode == 0, r.stdout + r.stderr
+    finally:
+        path.write_text(before, encoding="utf-8")
+
+
+def test_add_a_flow_row_then_remove_it(page, server: str, workspace: Path) -> None:
+    page.goto(server + "#" + FLOWS)
+    idle(page)
+    text = page.evaluate("window.editor.S.text")
+    page.click("[data-rows='traffic.flows'] .rows-head button.add")
+    idle(page)
+    assert page.locator("[data-rows='traffic.flows'] .rowcard").count() == 3
+    page.click("[data-field='traffic.flows.2.from'] button.pick")
+    click_lane(page, "T2C_1", 100.0)
+    page.click("[data-field='traffic.flows.2.to'] button.pick")
+    click_lane(page, "C2W_1", 60.0)
+    assert page.is_hidden("#error-box"), page.inner_text("#error-box")
+    added = page.evaluate("window.editor.S.text")
+    assert added.startswith(text)
+    assert added[len(text) :] == '\n[[traffic.flows]]\nid = "flow2"\nfrom = "T2C"\nto = "C2W"\nvehs_per_hour = 300\n'
+    page.click("[data-row='traffic.flows.2'] button.del")
+    idle(page)
+    assert page.evaluate("window.editor.S.text") == text
+
+
+def test_invalid_row_value_shows_the_validators_message_at_that_rows_field(page, server: str) -> None:
+    page.goto(server + "#" + FLOWS)
+    idle(page)
+    set_field(page, "traffic.flows.0.vehs_per_hour", "-5")
+    err = page.locator(".field.invalid[data-field='traffic.flows.0.vehs_per_hour'] .field-error")
+    assert err.count() == 1
+    assert re.search(
+        r"town01_09_behind_left_turner\.toml:52:\d+: field `traffic\.flows\[0\]\.vehs_per_hour` = -5: must be",
+        err.inner_text(),
+    ), err.inner_text()
+    # Only that row's field is marked; Save refuses the buffer.
+    assert page.locator(".invalid").count() == 1
+    page.click("#btn-save")
+    idle(page)
+    assert "not saved" in page.inner_text("#status")
+
+
+def _override_phases(page) -> None:
+    """Overrides town01's light C and copies the map's phases into the override's table."""
+    page.click("[data-light='C'] button:has-text('Override C')")
+    idle(page)
+    page.click("[data-light='C'] button:has-text('Edit phases')")
+    idle(page)
+
+
+def test_edit_a_phase_row_and_save(page, server: str, workspace: Path) -> None:
+    page.goto(server + "#" + PED)
+    idle(page)
+    _override_phases(page)
+    assert page.locator("[data-rows='lights.0.phases'] .rowcard").count() >= 2
+    set_field(page, "lights.0.phases.1.duration_s", "5")
+    state0 = page.input_value("[data-path='lights.0.phases.0.state']")
+    # An invalid state (a character short) is shown at that row's `state`.
+    set_field(page, "lights.0.phases.0.state", state0[:-1])
+    err = page.locator(".field.invalid[data-field='lights.0.phases.0.state'] .field-error")
+    assert err.count() == 1
+    assert f"field `lights[0].phases[0].state` = {state0[:-1]}: has" in err.inner_text()
+    set_field(page, "lights.0.phases.0.state", state0)
+    assert page.is_hidden("#error-box"), page.inner_text("#error-box")
+    page.fill("#saveas-path", "01_pedestrian/phases.toml")
+    page.click("#btn-saveas")
+    idle(page)
+    assert "saved" in page.inner_text("#status")
+    saved = workspace / "r4" / "01_pedestrian" / "phases.toml"
+    import tomllib
+
+    doc = tomllib.loads(saved.read_text(encoding="utf-8"))
+    assert doc["lights"][0]["tls"] == "C"
+    assert doc["lights"][0]["phases"][1]["duration_s"] == 5
+    assert doc["lights"][0]["phases"][0]["state"] == state0
+    r = validate_cli(saved)
+    assert r.returncode == 0, r.stdout + r.stderr
+    saved.unlink()
+
+
+def test_phase_timeline_now_marker_follows_the_slider(page, server: str) -> None:
+    page.goto(server + "#" + PED)
+    idle(page)
+    _override_phases(page)
+    # A two-phase program: all red for 5 s, then all green for 5 s.
+    n = len(page.input_value("[data-path='lights.0.phases.0.state']"))
+    while page.locator("[data-rows='lights.0.phases'] .rowcard").count() > 2:
+        page.click("[data-row='lights.0.phases.2'] button.del")
+        idle(page)
+    set_field(page, "lights.0.phases.0.state", "r" * n)
+    set_field(page, "lights.0.phases.0.duration_s", "5")
+    set_field(page, "lights.0.phases.1.state", "G" * n)
+    set_field(page, "lights.0.phases.1.duration_s", "5")
+    assert page.is_hidden("#error-box"), page.inner_text("#error-box")
+    tmax = float(page.get_attribute("#time", "max"))
+    marker = ".timeline-strip[data-tls='C'] .now"
+    text = ".now-text[data-tls='C']"
+
+    def slide(t: float) -> None:
+        page.eval_on_selector("#time", f"(el) => {{ el.value = '{t}'; el.dispatchEvent(new Event('input')); }}")
+        page.wait_for_function(f"Math.abs((window.editor.S.scene || {{time_s: -1}}).time_s - {t}) < 0.01")
+        idle(page)
+
+    lefts = []
+    for t, phase, color in [(2.0, 0, "red"), (7.0, 1, "green"), (12.0, 0, "red")]:
+        slide(t)
+        left = page.eval_on_selector(marker, "(el) => el.style.left")
+        assert float(left.rstrip("%")) == pytest.approx(100 * t / tmax, abs=1e-6)
+        lefts.append(page.eval_on_selector(marker, "(el) => el.getBoundingClientRect().left"))
+        # The schedule's phase at t, and the world's own colours of C's heads at t, agree.
+        shown = page.inner_text(text)
+        assert f"phase {phase} " in shown, shown
+        world = re.findall(r"\S+ (red|green|yellow|off)", shown.split("world:")[1])
+        assert world and set(world) == {color}, shown
+    assert lefts[0] < lefts[1] < lefts[2]

@@ -52,6 +52,62 @@ def test_a_key_of_a_missing_table_makes_the_table() -> None:
     assert apply_edits(out, [{"path": ["traffic", "mode"], "delete": True}]).startswith(TEXT)
 
 
+TRAFFIC = """version = 1
+
+[[lights]]
+tls = "J"
+phases = [                      # the program
+  { state = "GGrr", duration_s = 30.0 },
+  { state = "yyrr", duration_s = 3.0 },  # yellow
+]
+
+[traffic]
+mode = "sumo"
+
+[[traffic.flows]]
+id = "a"
+from = "E1"
+to = "E2"
+route_hint = ["E1"]
+"""
+
+
+def test_row_edits_of_the_forms_keep_the_rest() -> None:
+    """What the forms send: a cell of a `[[traffic.flows]]` row or of an inline phase row, a new
+    row of either, a row removed, an id added to a list, and `[traffic.random]` as a table."""
+    one = apply_edits(TRAFFIC, [{"path": ["traffic", "flows", 0, "to"], "value": "E3"}])
+    assert one == TRAFFIC.replace('to = "E2"', 'to = "E3"')
+    one = apply_edits(TRAFFIC, [{"path": ["lights", 0, "phases", 1, "duration_s"], "value": 4.0}])
+    assert one == TRAFFIC.replace("duration_s = 3.0 },  # yellow", "duration_s = 4.0 },  # yellow")
+    more = apply_edits(TRAFFIC, [{"path": ["lights", 0, "phases"], "append": {"state": "rrGG", "duration_s": 9.0}}])
+    assert more == TRAFFIC.replace(
+        "  # yellow\n]", '  # yellow\n  { state = "rrGG", duration_s = 9.0 },\n]'
+    )
+    less = apply_edits(TRAFFIC, [{"path": ["lights", 0, "phases", 0], "delete": True}])
+    assert less == TRAFFIC.replace('  { state = "GGrr", duration_s = 30.0 },\n', "")
+    flows = apply_edits(TRAFFIC, [{"path": ["traffic", "flows"], "append": {"id": "b", "vehs_per_hour": 300}}])
+    assert flows == TRAFFIC + '\n[[traffic.flows]]\nid = "b"\nvehs_per_hour = 300\n'
+    assert apply_edits(flows, [{"path": ["traffic", "flows", 1], "delete": True}]) == TRAFFIC
+    via = apply_edits(TRAFFIC, [{"path": ["traffic", "flows", 0, "route_hint"], "append": "E5"}])
+    assert via == TRAFFIC.replace('route_hint = ["E1"]', 'route_hint = ["E1", "E5"]')
+    rnd = apply_edits(
+        TRAFFIC, [{"path": ["traffic", "random"], "value": {"density_per_km": 8.0, "mix": {"car": 1.0}}, "table": True}]
+    )
+    assert rnd == TRAFFIC + "\n[traffic.random]\ndensity_per_km = 8.0\nmix = { car = 1.0 }\n"
+    with pytest.raises(ValueError, match="array of tables takes a table"):
+        apply_edits(TRAFFIC, [{"path": ["traffic", "flows"], "append": "E5"}])
+    with pytest.raises(ValueError, match="no array here"):
+        apply_edits(TRAFFIC, [{"path": ["traffic", "vehicles"], "append": "E5"}])
+
+
+def test_a_whole_number_over_a_float_stays_a_float() -> None:
+    # The page's numbers are JSON: 45 may stand for 45.0, which the file keeps.
+    assert apply_edits(TEXT, [{"path": ["ego", "start", "s"], "value": 45}]) == TEXT.replace("30.0", "45.0")
+    out = apply_edits(TRAFFIC, [{"path": ["lights", 0, "phases", 0], "value": {"state": "GGrr", "duration_s": 20}}])
+    assert out == TRAFFIC.replace("duration_s = 30.0", "duration_s = 20.0")
+    assert apply_edits(TEXT, [{"path": ["version"], "value": 2}]).startswith("version = 2   # schema")
+
+
 @pytest.mark.parametrize(
     "edit",
     [

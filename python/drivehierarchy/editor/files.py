@@ -102,6 +102,14 @@ def _table(value: dict[str, Any]) -> Table:
     return t
 
 
+def _keep_float(current: Any, value: Any) -> Any:
+    """A whole number typed over a float stays a float (`30.0`, not `30`): JSON (the page's
+    numbers) does not tell 30 from 30.0, the file does."""
+    if isinstance(current, float) and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    return value
+
+
 def doc_json(text: str) -> dict[str, Any] | None:
     """The TOML text as plain JSON-able data (None when it is no TOML)."""
     try:
@@ -121,7 +129,9 @@ def path_str(path: list[str | int]) -> str:
 def apply_edits(text: str, edits: list[dict[str, Any]]) -> str:
     """Applies edits to TOML text: `{"path": [...], "value": v}` sets, `{"path": [...],
     "delete": true}` removes, `{"path": ["actors"], "append": {...}}` adds a table to an array
-    of tables (created when missing). Everything not named keeps its bytes."""
+    of tables (created when missing) or a value to an array (`["actors", 0, "route", "lanes"]`);
+    `"table": true` beside a table `value` writes a new key as a `[table]` of its own rather than
+    inline. Everything not named keeps its bytes."""
     doc = tomlkit.parse(text)
     for e in edits:
         path = e.get("path")
@@ -142,12 +152,14 @@ def apply_edits(text: str, edits: list[dict[str, Any]]) -> str:
         last = path[-1]
         if "append" in e:
             value = e["append"]
-            if not isinstance(value, dict):
-                raise ValueError(f"edit of `{where}`: `append` takes a table")
             if isinstance(parent, (Table, tomlkit.TOMLDocument)) and last not in parent:
+                if not isinstance(value, dict):
+                    raise ValueError(f"edit of `{where}`: no array here to append to")
                 parent.append(last, tomlkit.aot())
             target = _container(parent, last)
             if isinstance(target, AoT):
+                if not isinstance(value, dict):
+                    raise ValueError(f"edit of `{where}`: an array of tables takes a table")
                 table = tomlkit.table()
                 table.trivia.indent = "\n"  # a blank line before the new `[[...]]`, as the suite has
                 for k, v in value.items():
@@ -165,24 +177,29 @@ def apply_edits(text: str, edits: list[dict[str, Any]]) -> str:
         elif "value" in e:
             value = e["value"]
             current = parent.get(last) if isinstance(parent, dict) else None
+            if isinstance(parent, list) and isinstance(last, int) and -len(parent) <= last < len(parent):
+                current = parent[last]
+            value = _keep_float(current, value)
             if isinstance(current, InlineTable) and isinstance(value, dict) and set(current) == set(value):
                 # Same keys in place: the table keeps its layout, only changed values differ.
                 for k, v in value.items():
+                    v = _keep_float(current.get(k), v)
                     if current.get(k) != v:
                         current[k] = _item(v)
                 continue
             try:
                 # A `[table]` stays a table (with `[[sub]]` arrays), not an inline one.
-                parent[last] = (
-                    _table(value) if isinstance(current, Table) and isinstance(value, dict) else _item(value)
-                )
+                # `"table": true` makes a new `[parent.key]` table (`[traffic.random]`).
+                as_table = isinstance(value, dict) and (isinstance(current, Table) or bool(e.get("table")))
+                parent[last] = _table(value) if as_table else _item(value)
             except (IndexError, TypeError) as exc:
                 raise ValueError(f"edit of `{where}`: {exc}") from exc
         else:
             raise ValueError(f"edit of `{where}`: give `value`, `delete` or `append`")
     out = tomlkit.dumps(doc)
-    # A table appended at the end still ends the file with a newline.
-    return out + "\n" if text.endswith("\n") and not out.endswith("\n") else out
+    # The file ends as it did: a table appended at the end still ends with the newline, one
+    # removed from the end leaves no blank line behind.
+    return out.rstrip("\r\n") + text[len(text.rstrip("\r\n")) :]
 
 
 ERROR_RE = re.compile(

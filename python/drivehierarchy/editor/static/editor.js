@@ -56,23 +56,29 @@ async function setBuffer(d) {
   if (d.ok) {
     S.geo = d.geometry;
     S.error = null;
+    // The slider spans the episode's timeout (2 × the scenario duration); the light timelines too.
+    $("time").max = String(Math.max(5, Math.ceil(S.geo.scenario_duration_s * 2)));
   } else {
     S.error = d.error;
   }
   $("path").textContent = S.path ? S.path + (S.dirty ? " *" : "") : "";
   $("toml").value = S.text;
   await ensureMap();
+  // The form is rebuilt from the new text: the input that had the focus gets it back.
+  const focused = document.activeElement && document.activeElement.dataset && document.activeElement.dataset.path;
   renderForm();
   renderSummary();
   showError();
+  if (focused) {
+    const el = document.querySelector(`[data-path="${CSS.escape(focused)}"]`);
+    if (el && el.type !== "hidden") el.focus();
+  }
   draw();
   if (!S.error) {
     S.run = null;
     $("run-result").textContent = "";
     $("probe-result").textContent = "";
     drawTimeline();
-    const dur = S.geo.scenario_duration_s;
-    $("time").max = String(Math.max(5, Math.ceil(dur * 2)));
     schedulePreview();
   }
 }
@@ -93,7 +99,15 @@ async function ensureMap() {
   }
 }
 
-async function edit(edits) {
+// Edits run one after the other, each on the text the one before left.
+let editChain = Promise.resolve();
+function edit(edits) {
+  const run = editChain.then(() => applyEdit(edits));
+  editChain = run.catch(() => {});
+  return run;
+}
+
+async function applyEdit(edits) {
   const d = await api("/api/edit", { ...buffer(), edits });
   if (d.error && !("ok" in d)) throw new Error(d.error);
   S.dirty = true;
@@ -312,6 +326,7 @@ const HELP = {
 
 function setMode(mode) {
   S.mode = mode;
+  S.pick = null;
   S.pending = [];
   for (const b of document.querySelectorAll("#tools button[data-mode]")) {
     b.classList.toggle("active", b.dataset.mode === mode);
@@ -445,7 +460,13 @@ canvas.addEventListener("click", async (ev) => {
   if (S.mode === "select") return;
   const [px, py] = eventPos(ev);
   const [x, y] = toWorld(px, py);
-  if (S.mode === "ego-start" || S.mode === "ego-dest") {
+  if (S.mode === "pick" && S.pick) {
+    const p = S.pick;
+    const hit = await snap(x, y, p.vclass, false);
+    if (!hit.lane && p.vclass !== null) return status("no lane there" + (p.vclass ? ` open to ${p.vclass}` : ""), "bad");
+    setMode("select");
+    await p.apply(hit, x, y);
+  } else if (S.mode === "ego-start" || S.mode === "ego-dest") {
     const hit = await snap(x, y, "passenger", false);
     if (!hit.lane) return status("no drivable lane there", "bad");
     const key = S.mode === "ego-start" ? "start" : "destination";
@@ -466,6 +487,7 @@ canvas.addEventListener("click", async (ev) => {
 canvas.addEventListener("dblclick", () => finishActor());
 window.addEventListener("keydown", (ev) => {
   if (ev.target.tagName === "INPUT" || ev.target.tagName === "TEXTAREA") return;
+  if (ev.key === "Escape" && S.mode === "pick") return setMode("select");
   if (ev.key === "Enter") finishActor();
   if (ev.key === "Escape") setMode("select");
 });
@@ -492,13 +514,15 @@ async function finishActor() {
 }
 
 // -- forms -------------------------------------------------------------------------------------
+// Every input is bound to a key path of the TOML (`data-path`, the validator's field name with
+// indices as `.i`), so an edit changes that key only and the validator's message lands on it.
 function h(tag, attrs, ...children) {
   const el = document.createElement(tag);
   for (const [k, v] of Object.entries(attrs || {})) {
     if (k.startsWith("on")) el.addEventListener(k.slice(2), v);
     else if (v !== undefined && v !== null) el.setAttribute(k, v);
   }
-  for (const c of children) if (c !== null && c !== undefined) el.append(c);
+  for (const c of children) if (c !== null && c !== undefined && c !== false) el.append(c);
   return el;
 }
 
@@ -511,38 +535,222 @@ function get(obj, path) {
   return o;
 }
 
-// One input bound to a key path. kind: "number", "text", "json" or a list of choices.
-function field(label, path, kind) {
+function isObj(v) {
+  return v !== null && typeof v === "object" && !Array.isArray(v);
+}
+
+function safeEdit(edits) {
+  return edit(edits).catch((e) => status(e.message, "bad"));
+}
+
+// The value typed into an input of `kind`; `undefined` when it is not one (status says why).
+function parseValue(raw, kind, path) {
+  if (kind === "number" || kind === "int") {
+    const v = Number(raw);
+    return Number.isFinite(v) ? v : raw; // the validator says what is wrong
+  }
+  if (kind === "numkw") {
+    // A number or a keyword (`depart_lane = 1` or `"best"`).
+    const v = Number(raw);
+    return raw !== "" && Number.isFinite(v) ? v : raw;
+  }
+  if (kind === "json") {
+    try {
+      return JSON.parse(raw);
+    } catch (e) {
+      status(`${path.join(".")}: not JSON (${e.message})`, "bad");
+      return undefined;
+    }
+  }
+  return raw;
+}
+
+// One control bound to a key path. kind: "number", "int", "numkw", "text", "json", "lane",
+// "edge" (text with a pick-on-the-map button) or a list of choices. An emptied input deletes
+// the key (its default applies).
+function control(path, kind, opts) {
+  opts = opts || {};
   const value = get(S.doc, path);
   let input;
   if (Array.isArray(kind)) {
-    input = h("select", {}, ...kind.map((c) => h("option", { value: c }, c === "" ? "(default)" : c)));
+    const choices = value !== undefined && !kind.includes(String(value)) ? [...kind, String(value)] : kind;
+    input = h("select", {}, ...choices.map((c) => h("option", { value: c }, c === "" ? "(default)" : c)));
     input.value = value === undefined ? "" : String(value);
   } else {
-    input = h("input", { type: "text" });
+    input = h("input", { type: "text", placeholder: opts.placeholder, list: opts.list });
     input.value = value === undefined ? "" : kind === "json" ? JSON.stringify(value) : String(value);
+    if (kind === "number" || kind === "int") input.inputMode = "decimal";
   }
   input.dataset.path = path.join(".");
   input.addEventListener("change", async () => {
     const raw = input.value.trim();
-    if (raw === "") return edit([{ path, delete: true }]).catch((e) => status(e.message, "bad"));
-    let v = raw;
-    if (kind === "number") v = Number(raw);
-    if (kind === "json") {
-      try {
-        v = JSON.parse(raw);
-      } catch (e) {
-        return status(`${path.join(".")}: not JSON (${e.message})`, "bad");
-      }
-    }
-    if (kind === "number" && !Number.isFinite(v)) v = raw; // the validator says what is wrong
-    await edit([{ path, value: v }]).catch((e) => status(e.message, "bad"));
+    if (raw === "") return safeEdit([{ path, delete: true }]);
+    const v = parseValue(raw, kind, path);
+    if (v === undefined) return;
+    await safeEdit([{ path, value: v }]);
   });
-  return h("div", { class: "field", "data-field": path.join(".") }, h("label", {}, label), input);
+  if (kind !== "lane" && kind !== "edge") return input;
+  const pickBtn = h("button", {
+    class: "pick", type: "button", title: `pick the ${kind} on the map`,
+    onclick: () => pick(`${path.join(".")}: click a lane`, opts.vclass, (hit) => {
+      const id = kind === "lane" ? hit.lane : laneEdge(hit.lane);
+      return safeEdit([{ path, value: id }]);
+    }),
+  }, "⌖");
+  return h("span", { class: "with-pick" }, input, pickBtn);
+}
+
+// A labelled control: a form line, or (`cell`) a compact cell of a row.
+function field(label, path, kind, opts) {
+  const cls = opts && opts.cell ? "field cell" : "field";
+  return h("div", { class: cls, "data-field": path.join(".") }, h("label", {}, label), control(path, kind, opts));
+}
+
+function cell(label, path, kind, opts) {
+  return field(label, path, kind, { ...(opts || {}), cell: true });
+}
+
+function laneEdge(lane) {
+  const l = S.map && S.map.lanes.find((x) => x.id === lane);
+  return l ? l.edge : lane;
+}
+
+// Map picking: the next click on the map snaps to a lane (open to `vclass`) and calls `apply`.
+function pick(help, vclass, apply) {
+  setMode("pick");
+  S.pick = { vclass: vclass === undefined ? "passenger" : vclass, apply };
+  $("mode-help").textContent = help + " (Esc cancels)";
+}
+
+// The keys a form shows of a table; any other key is edited as JSON (the fallback).
+function extras(obj, known, prefix, cellMode) {
+  if (!isObj(obj)) return [];
+  return Object.keys(obj).filter((k) => !known.includes(k))
+    .map((k) => field(`${k} (JSON)`, [...prefix, k], "json", { cell: cellMode }));
+}
+
+// A list of rows (an array of tables, inline or `[[...]]`) with add and remove. `cells(p, item,
+// i)` gives a row's cells; `fresh()` a new row.
+function rows(title, path, cells, fresh, opts) {
+  opts = opts || {};
+  const items = get(S.doc, path);
+  const box = h("div", { class: "rows", "data-rows": path.join(".") });
+  const add = h("button", {
+    type: "button", class: "add",
+    onclick: () => {
+      const v = fresh();
+      if (v === undefined) return undefined;
+      // A new inline array is written as a value; `[[...]]` tables and existing arrays get a row.
+      if (Array.isArray(items) || !opts.inline) return safeEdit([{ path, append: v }]);
+      return safeEdit([{ path, value: [v] }]);
+    },
+  }, opts.addLabel || "+ add");
+  box.append(h("div", { class: "rows-head" }, h("strong", {}, title), add));
+  (Array.isArray(items) ? items : []).forEach((item, i) => {
+    const p = [...path, i];
+    const row = h("div", { class: "rowcard", "data-row": p.join(".") },
+      h("span", { class: "idx" }, `${i}`), ...cells(p, item, i),
+      h("button", { type: "button", class: "del", title: `remove ${path.join(".")}[${i}]`, onclick: () => safeEdit([{ path: p, delete: true }]) }, "×"));
+    box.append(row);
+  });
+  if (items !== undefined && !Array.isArray(items)) box.append(field(`${path[path.length - 1]} (JSON)`, path, "json"));
+  return box;
+}
+
+// A list of ids (lanes or edges) with one input per entry, remove, and add by picking on the map.
+function idList(label, path, kind, vclass) {
+  const items = get(S.doc, path);
+  const box = h("div", { class: "field idlist", "data-field": path.join(".") }, h("label", {}, label));
+  const line = h("div", { class: "ids" });
+  const holder = h("input", { type: "hidden" });
+  holder.dataset.path = path.join(".");
+  line.append(holder);
+  (Array.isArray(items) ? items : []).forEach((_, i) => {
+    const p = [...path, i];
+    line.append(h("span", { class: "id field cell", "data-field": p.join(".") }, control(p, "text"),
+      h("button", { type: "button", class: "del", title: "remove", onclick: () => safeEdit([{ path: p, delete: true }]) }, "×")));
+  });
+  line.append(h("button", {
+    type: "button", class: "pick", title: `add a ${kind} picked on the map`,
+    onclick: () => pick(`${path.join(".")}: click a lane to add its ${kind}`, vclass, (hit) => {
+      const id = kind === "lane" ? hit.lane : laneEdge(hit.lane);
+      return safeEdit([Array.isArray(items) ? { path, append: id } : { path, value: [id] }]);
+    }),
+  }, `+ ${kind} ⌖`));
+  box.append(line);
+  return box;
+}
+
+// A place: `{ lane, s, offset_m }`, `{ x, y }`, `[x, y]` (`pair`) or "actor_self" (`self`).
+function placeKind(v) {
+  if (typeof v === "string") return "self";
+  if (Array.isArray(v)) return "pair";
+  if (isObj(v) && !("lane" in v) && ("x" in v || "y" in v)) return "xy";
+  return "lane";
+}
+
+function placeField(label, path, opts) {
+  opts = opts || {};
+  const v = get(S.doc, path);
+  const kind = v === undefined && opts.self ? "self" : placeKind(v);
+  const kinds = [["lane", "lane + s"], ["xy", "x, y"]];
+  if (opts.pair) kinds.push(["pair", "[x, y]"]);
+  if (opts.self) kinds.push(["self", "actor_self"]);
+  const sel = h("select", {}, ...kinds.map(([k, t]) => h("option", { value: k }, t)));
+  sel.value = kind;
+  sel.dataset.path = path.join(".");
+  const here = () => (opts.point ? opts.point() : null) || [0, 0];
+  sel.addEventListener("change", async () => {
+    const k = sel.value;
+    const [x, y] = here().map(round);
+    let nv;
+    if (k === "self") nv = "actor_self";
+    else if (k === "pair") nv = [x, y];
+    else if (k === "xy") nv = { x, y };
+    else {
+      const hit = await snap(x, y, opts.vclass === undefined ? "passenger" : opts.vclass, false).catch(() => null);
+      nv = hit && hit.lane ? { lane: hit.lane, s: hit.s } : { lane: "", s: 0.0 };
+    }
+    await safeEdit([{ path, value: nv }]);
+  });
+  const pickBtn = h("button", {
+    type: "button", class: "pick", title: "place it by clicking the map",
+    onclick: () => pick(`${path.join(".")}: click the place`, opts.vclass, (hit, x, y) => {
+      let nv;
+      if (kind === "pair") nv = [round(x), round(y)];
+      else if (kind === "xy") nv = { ...(isObj(v) ? v : {}), x: round(x), y: round(y) };
+      else {
+        if (!hit.lane) return status("no lane there", "bad");
+        nv = { lane: hit.lane, s: hit.s };
+        if (isObj(v) && v.offset_m !== undefined) nv.offset_m = v.offset_m;
+        if (isObj(v) && v.yaw_deg !== undefined) nv.yaw_deg = v.yaw_deg;
+        if (opts.keep) for (const key of opts.keep) if (isObj(v) && v[key] !== undefined) nv[key] = v[key];
+      }
+      return safeEdit([{ path, value: nv }]);
+    }),
+  }, "⌖");
+  const head = h("div", { class: "field place-head", "data-field": path.join(".") }, h("label", {}, label),
+    h("span", { class: "with-pick" }, sel, pickBtn));
+  const cells = h("div", { class: "cells" });
+  if (kind === "lane") {
+    cells.append(cell("lane", [...path, "lane"], "lane", { vclass: opts.vclass }), cell("s", [...path, "s"], "number"),
+      cell("offset_m", [...path, "offset_m"], "number"));
+  } else if (kind === "xy") {
+    cells.append(cell("x", [...path, "x"], "number"), cell("y", [...path, "y"], "number"));
+  } else if (kind === "pair") {
+    cells.append(cell("x", [...path, 0], "number"), cell("y", [...path, 1], "number"));
+  }
+  if (isObj(v) && (kind === "lane" || kind === "xy")) {
+    cells.append(cell("yaw_deg", [...path, "yaw_deg"], "number"));
+    for (const k of opts.more || []) cells.append(cell(k, [...path, k], "number"));
+    cells.append(...extras(v, ["lane", "s", "offset_m", "x", "y", "yaw_deg", ...(opts.more || [])], path, true));
+  }
+  return h("div", { class: "place" }, head, cells);
 }
 
 const TRIGGERS = ["time_s", "ego_within_m", "ego_eta_s", "after"];
 const BRAKES = ["", "at_s", "after_s", "ego_within_m", "ego_gap_m", "ego_gap_s", "ego_ttc_s", "ego_eta_s", "gap_held_s", "after"];
+const BRAKE_KEYS = ["decel_mps2", "to_speed_mps", "hold_s"];
 
 function triggerKind(t) {
   if (!t) return "time_s";
@@ -555,40 +763,127 @@ function defaultPlace() {
   return "actor_self";
 }
 
+function actorNames(except) {
+  return (S.doc.actors || []).map((a, j) => [j, a.name || `actors[${j}]`]).filter(([j]) => j !== except).map(([, n]) => n);
+}
+
+// The world point a trigger's `of` resolved to (for switching its form to x, y).
+function triggerPoint(i) {
+  const g = S.geo && S.geo.actors[i];
+  const t = g && g.motion.trigger;
+  return t && t.point ? t.point : null;
+}
+
+// A start trigger or brake: the kind, then that kind's fields.
 function triggerFields(i, prefix, t, choices) {
-  const box = h("div", {});
-  const kind = prefix[prefix.length - 1] === "brake" ? (BRAKES.find((k) => k && t && k in t) || "") : triggerKind(t);
+  const isBrake = prefix[prefix.length - 1] === "brake";
+  const box = h("div", { class: "trigger" });
+  const kind = isBrake ? (BRAKES.find((k) => k && t && k in t) || "") : triggerKind(t);
   const sel = h("select", {}, ...choices.map((c) => h("option", { value: c }, c || "(none)")));
   sel.value = kind;
   sel.dataset.path = prefix.join(".") + ".kind";
   sel.addEventListener("change", async () => {
     const k = sel.value;
     const keep = {};
-    if (prefix[prefix.length - 1] === "brake" && t) {
-      for (const key of ["decel_mps2", "to_speed_mps", "hold_s"]) if (t[key] !== undefined) keep[key] = t[key];
-    }
-    if (k === "") return edit([{ path: prefix, delete: true }]);
-    const first = (S.doc.actors || []).map((a, j) => a.name || `actors[${j}]`).find((_, j) => j !== i);
+    if (isBrake && t) for (const key of BRAKE_KEYS) if (t[key] !== undefined) keep[key] = t[key];
+    if (k === "") return safeEdit([{ path: prefix, delete: true }]);
+    const first = actorNames(i)[0];
     const v = {
       time_s: { time_s: 0.0 }, ego_within_m: { ego_within_m: 20.0 }, ego_eta_s: { ego_eta_s: 3.0, of: defaultPlace() },
       after: { after: first || "", delay_s: 0.0 }, at_s: { at_s: 10.0 }, after_s: { after_s: 2.0 },
       ego_gap_m: { ego_gap_m: 15.0 }, ego_gap_s: { ego_gap_s: 1.5 }, ego_ttc_s: { ego_ttc_s: 3.0 },
       gap_held_s: { gap_held_s: 3.0 },
     }[k];
-    if (prefix[prefix.length - 1] === "brake" && keep.decel_mps2 === undefined) keep.decel_mps2 = 6.0;
-    await edit([{ path: prefix, value: { ...v, ...keep } }]);
+    if (isBrake && keep.decel_mps2 === undefined) keep.decel_mps2 = 6.0;
+    await safeEdit([{ path: prefix, value: { ...v, ...keep } }]);
   });
-  box.append(h("div", { class: "field", "data-field": prefix.join(".") }, h("label", {}, prefix[prefix.length - 1]), sel));
-  if (kind) {
-    if (kind !== "after") box.append(field(kind, [...prefix, kind], "number"));
-    if (kind === "after") {
-      box.append(field("after (actor)", [...prefix, "after"], "text"));
-      box.append(field("delay_s", [...prefix, "delay_s"], "number"));
-      box.append(field("event", [...prefix, "event"], ["", "start", "brake", "end"]));
-    }
-    if (["ego_within_m", "ego_eta_s"].includes(kind)) box.append(field("of", [...prefix, "of"], "json"));
+  box.append(h("div", { class: "field", "data-field": prefix.join(".") }, h("label", {}, isBrake ? "brake when" : "start when"), sel));
+  if (!kind) return box;
+  const cells = h("div", { class: "cells" });
+  if (kind === "after") {
+    const names = actorNames(i);
+    cells.append(cell("after (actor)", [...prefix, "after"], names.length ? names : "text"),
+      cell("delay_s", [...prefix, "delay_s"], "number"), cell("event", [...prefix, "event"], ["", "start", "brake", "end"]));
+  } else {
+    cells.append(cell(kind, [...prefix, kind], "number"));
   }
+  if (isBrake) for (const key of BRAKE_KEYS) cells.append(cell(key, [...prefix, key], "number"));
+  box.append(cells);
+  if (["ego_within_m", "ego_eta_s"].includes(kind)) {
+    box.append(placeField("of", [...prefix, "of"], { pair: true, self: kind === "ego_within_m" || !isBrake, point: () => triggerPoint(i) }));
+  }
+  const known = [...TRIGGERS, ...BRAKES.filter(Boolean), "of", "delay_s", "event", ...BRAKE_KEYS];
+  if (isObj(t)) box.append(...extras(t, known, prefix));
   return box;
+}
+
+function paceFields(p, pace) {
+  const box = h("div", { class: "pace" });
+  if (!isObj(pace)) {
+    box.append(h("div", { class: "row" }, h("span", { class: "help" }, "pace: none"),
+      h("button", { type: "button", onclick: () => safeEdit([{ path: p, value: { gap_s: 1.5, gap_m: 2.0, min_speed_mps: 1.0 } }]) }, "+ gap pace"),
+      h("button", { type: "button", onclick: () => safeEdit([{ path: p, value: { meet: defaultPlace() === "actor_self" ? [0.0, 0.0] : defaultPlace(), offset_s: 0.0 } }]) }, "+ meet pace")));
+    return box;
+  }
+  const meet = "meet" in pace;
+  const cells = h("div", { class: "cells" });
+  if (!meet) cells.append(cell("gap_m", [...p, "gap_m"], "number"), cell("gap_s", [...p, "gap_s"], "number"));
+  else cells.append(cell("offset_s", [...p, "offset_s"], "number"));
+  cells.append(cell("min_speed_mps", [...p, "min_speed_mps"], "number"), cell("max_speed_mps", [...p, "max_speed_mps"], "number"),
+    cell("until_s", [...p, "until_s"], "number"));
+  box.append(h("div", { class: "rows-head", "data-field": p.join(".") }, h("strong", {}, meet ? "pace (meet)" : "pace (gap)"),
+    h("button", { type: "button", class: "del", title: "remove pace", onclick: () => safeEdit([{ path: p, delete: true }]) }, "×")), cells);
+  if (meet) box.append(placeField("meet", [...p, "meet"], { pair: true }));
+  box.append(...extras(pace, ["gap_m", "gap_s", "min_speed_mps", "max_speed_mps", "until_s", "meet", "offset_s"], p));
+  return box;
+}
+
+function routeFields(p, route, vclass) {
+  const box = h("div", { class: "route" });
+  const byEdges = isObj(route) && "edges" in route;
+  box.append(h("div", { class: "rows-head" }, h("strong", {}, byEdges ? "route (edges)" : "route (lanes)")));
+  if (byEdges) box.append(idList("edges", [...p, "edges"], "edge", vclass), field("start_lane", [...p, "start_lane"], "lane", { vclass }));
+  else box.append(idList("lanes", [...p, "lanes"], "lane", vclass));
+  box.append(h("div", { class: "cells" }, cell("start_s", [...p, "start_s"], "number"), cell("end_s", [...p, "end_s"], "number"),
+    cell("offset_m", [...p, "offset_m"], "number")));
+  box.append(...extras(route, ["edges", "lanes", "start_lane", "start_s", "end_s", "offset_m"], p));
+  return box;
+}
+
+const ACTOR_KEYS = ["name", "kind", "speed_mps", "accel_mps2", "initial_speed_mps", "at_end", "waypoints", "route", "start", "brake",
+  "pace", "lane_changes", "behavior", "at", "length_m", "width_m", "height_m"];
+
+function actorForm(a, i) {
+  const fs = h("fieldset", { "data-actor": i, class: S.selected === i ? "selected" : "" },
+    h("legend", {}, `actors[${i}] ${a.name || ""}`));
+  const p = ["actors", i];
+  const vclass = vclassFor(a.kind);
+  fs.append(field("name", [...p, "name"], "text"),
+    field("kind", [...p, "kind"], ["car", "bus", "truck", "motorcycle", "cyclist", "pedestrian"]),
+    h("div", { class: "cells" }, cell("speed_mps", [...p, "speed_mps"], "number"), cell("accel_mps2", [...p, "accel_mps2"], "number"),
+      cell("initial_speed_mps", [...p, "initial_speed_mps"], "number"), cell("at_end", [...p, "at_end"], ["", "stop", "remove"]),
+      cell("length_m", [...p, "length_m"], "number"), cell("width_m", [...p, "width_m"], "number"), cell("height_m", [...p, "height_m"], "number")));
+  if ("behavior" in a) fs.append(field("behavior", [...p, "behavior"], ["scripted", "external"]));
+  if ("at" in a) fs.append(placeField("at", [...p, "at"], { vclass }));
+  if ("waypoints" in a) {
+    fs.append(rows("waypoints", [...p, "waypoints"], (wp) => [placeField("", wp, { vclass, more: ["speed_mps"] })],
+      () => {
+        const last = (a.waypoints || [])[a.waypoints.length - 1];
+        return isObj(last) && last.lane ? { lane: last.lane, s: round((last.s || 0) + 10) } : { x: 0.0, y: 0.0 };
+      }, { inline: true, addLabel: "+ waypoint" }));
+  }
+  if ("route" in a) fs.append(routeFields([...p, "route"], a.route, vclass));
+  fs.append(triggerFields(i, [...p, "start"], a.start, TRIGGERS));
+  fs.append(triggerFields(i, [...p, "brake"], a.brake, BRAKES));
+  fs.append(paceFields([...p, "pace"], a.pace));
+  if ("route" in a || "lane_changes" in a) {
+    fs.append(rows("lane_changes", [...p, "lane_changes"], (lc) => [cell("at_s", [...lc, "at_s"], "number"),
+      cell("to_lane", [...lc, "to_lane"], "lane", { vclass }), cell("length_m", [...lc, "length_m"], "number")],
+    () => ({ at_s: 20.0, to_lane: "", length_m: 20.0 }), { inline: true, addLabel: "+ lane change" }));
+  }
+  fs.append(...extras(a, ACTOR_KEYS, p));
+  fs.append(h("button", { type: "button", onclick: () => safeEdit([{ path: ["actors", i], delete: true }]) }, "Delete actor"));
+  return fs;
 }
 
 function renderForm() {
@@ -600,43 +895,185 @@ function renderForm() {
     field("category", ["category"], (S.info && S.info.categories) || []),
     field("description", ["description"], "text"), field("map", ["map"], "text"),
     field("reference_duration_s", ["reference_duration_s"], "number"), field("duration_s", ["duration_s"], "number"),
-    field("seed", ["seed"], "number"));
+    field("seed", ["seed"], "int"));
+  gen.append(...extras(S.doc, ["version", "id", "name", "category", "description", "map", "reference_duration_s", "duration_s",
+    "seed", "ego", "actors", "obstacles", "lights", "traffic"], []));
   const ego = h("fieldset", {}, h("legend", {}, "Ego"));
-  ego.append(field("start", ["ego", "start"], "json"), field("destination", ["ego", "destination"], "json"),
-    field("route_edges", ["ego", "route_edges"], "json"), field("speed_mps", ["ego", "speed_mps"], "number"));
+  const egoPoint = (key) => () => {
+    if (!S.geo) return null;
+    return key === "start" ? [S.geo.ego.start.x, S.geo.ego.start.y] : S.geo.ego.destination;
+  };
+  ego.append(placeField("start", ["ego", "start"], { point: egoPoint("start") }),
+    placeField("destination", ["ego", "destination"], { point: egoPoint("destination") }),
+    idList("route_edges", ["ego", "route_edges"], "edge", "passenger"), field("speed_mps", ["ego", "speed_mps"], "number"));
+  ego.append(...extras(S.doc.ego, ["start", "destination", "route_edges", "speed_mps"], ["ego"]));
   form.append(gen, ego);
-  (S.doc.actors || []).forEach((a, i) => {
-    const fs = h("fieldset", { "data-actor": i, class: S.selected === i ? "selected" : "" },
-      h("legend", {}, `actors[${i}] ${a.name || ""}`));
-    const p = ["actors", i];
-    fs.append(field("name", [...p, "name"], "text"),
-      field("kind", [...p, "kind"], ["car", "bus", "truck", "motorcycle", "cyclist", "pedestrian"]),
-      field("speed_mps", [...p, "speed_mps"], "number"), field("accel_mps2", [...p, "accel_mps2"], "number"),
-      field("initial_speed_mps", [...p, "initial_speed_mps"], "number"),
-      field("at_end", [...p, "at_end"], ["", "stop", "remove"]));
-    if ("waypoints" in a) fs.append(field("waypoints", [...p, "waypoints"], "json"));
-    if ("route" in a) fs.append(field("route", [...p, "route"], "json"));
-    fs.append(h("div", { class: "help" }, "start trigger"), triggerFields(i, [...p, "start"], a.start, TRIGGERS));
-    if (a.brake) {
-      fs.append(h("div", { class: "help" }, "brake"), triggerFields(i, [...p, "brake"], a.brake, BRAKES),
-        field("decel_mps2", [...p, "brake", "decel_mps2"], "number"),
-        field("to_speed_mps", [...p, "brake", "to_speed_mps"], "number"), field("hold_s", [...p, "brake", "hold_s"], "number"));
-    } else {
-      fs.append(triggerFields(i, [...p, "brake"], undefined, BRAKES));
-    }
-    fs.append(field("pace", [...p, "pace"], "json"), field("lane_changes", [...p, "lane_changes"], "json"));
-    fs.append(h("button", { onclick: () => edit([{ path: ["actors", i], delete: true }]) }, "Delete actor"));
-    form.append(fs);
-  });
+  (S.doc.actors || []).forEach((a, i) => form.append(actorForm(a, i)));
   (S.doc.obstacles || []).forEach((o, i) => {
     const fs = h("fieldset", {}, h("legend", {}, `obstacles[${i}] ${o.name || ""}`));
     const p = ["obstacles", i];
     fs.append(field("kind", [...p, "kind"], ["cone", "barrier", "static_object", "car", "bus", "truck", "motorcycle", "cyclist", "pedestrian"]),
-      field("at", [...p, "at"], "json"), field("name", [...p, "name"], "text"),
-      h("button", { onclick: () => edit([{ path: ["obstacles", i], delete: true }]) }, "Delete obstacle"));
+      placeField("at", [...p, "at"], { vclass: null }), field("name", [...p, "name"], "text"),
+      ...extras(o, ["kind", "at", "name"], p),
+      h("button", { type: "button", onclick: () => safeEdit([{ path: ["obstacles", i], delete: true }]) }, "Delete obstacle"));
     form.append(fs);
   });
   renderLights();
+}
+
+// -- lights and traffic ------------------------------------------------------------------------
+const LINK = { r: LIGHT.red, s: LIGHT.red, y: LIGHT.yellow, g: LIGHT.green, G: LIGHT.green, u: LIGHT.yellow, o: LIGHT.off, O: LIGHT.off };
+
+function timeMax() {
+  return Number($("time").max) || 60;
+}
+
+// A light's program over episode time: one column per phase as the world runs it (its schedule
+// from `_core.scenario_geometry`), one row per link index, and a "now" marker at the slider.
+function lightTimeline(prog) {
+  const wrap = h("div", { class: "timeline-strip", "data-tls": prog.tl_id });
+  const c = h("canvas", { width: 400, height: 36 });
+  wrap.append(c, h("i", { class: "now", "data-tls": prog.tl_id }), h("div", { class: "help now-text", "data-tls": prog.tl_id }));
+  const g = c.getContext("2d");
+  const tmax = timeMax();
+  const links = Math.max(1, ...prog.phases.map((p) => p.state.length));
+  const rowH = c.height / links;
+  for (const [t0, t1, i] of prog.schedule) {
+    const x0 = (t0 / tmax) * c.width, x1 = (Math.min(t1, tmax) / tmax) * c.width;
+    const st = prog.phases[i].state;
+    for (let k = 0; k < links; k++) {
+      g.fillStyle = LINK[st[k]] || LIGHT.off;
+      g.fillRect(x0, k * rowH, Math.max(1, x1 - x0), Math.max(1, rowH - (links > 8 ? 0 : 1)));
+    }
+    g.fillStyle = "rgba(0,0,0,.35)";
+    g.fillRect(x0, 0, 1, c.height);
+  }
+  c.title = `${prog.tl_id}: phases over t = 0…${tmax} s (rows: link indices)`;
+  return wrap;
+}
+
+// The phase at time t of a light's schedule (a lookup in the world's schedule).
+function phaseAt(prog, t) {
+  for (const [t0, t1, i] of prog.schedule) if (t >= t0 && t < t1) return { i, left: t1 - t };
+  return null;
+}
+
+// Moves the "now" markers to the slider's time (the world's colours at t when the scene is in).
+function updateNow() {
+  const t = Number($("time").value);
+  const tmax = timeMax();
+  for (const el of document.querySelectorAll(".timeline-strip .now")) {
+    el.style.left = `${(100 * Math.min(t, tmax)) / tmax}%`;
+    el.dataset.time = String(t);
+  }
+  if (!S.geo || !S.geo.lights) return;
+  for (const prog of S.geo.lights) {
+    const el = document.querySelector(`.now-text[data-tls="${CSS.escape(prog.tl_id)}"]`);
+    if (!el) continue;
+    const ph = phaseAt(prog, t);
+    let msg = ph ? `t = ${t.toFixed(2)} s: phase ${ph.i} (${prog.phases[ph.i].state}), ${ph.left.toFixed(1)} s left` : "";
+    if (S.scene && Math.abs(S.scene.time_s - t) < 0.3) {
+      const heads = S.scene.lights.filter((l) => l.tl_id === prog.tl_id).map((l) => `${l.lane} ${l.color}`);
+      if (heads.length) msg += `; world: ${heads.join(", ")}`;
+    }
+    el.textContent = msg;
+  }
+}
+
+function lightForm(prog, idx) {
+  const box = h("div", { class: "light", "data-light": prog.id });
+  const world = S.geo && S.geo.lights ? S.geo.lights.find((l) => l.tl_id === prog.id) : null;
+  const cycle = world ? world.cycle_s : prog.cycle_s;
+  box.append(h("div", { class: "rows-head" }, h("strong", {}, prog.id),
+    h("span", {}, idx >= 0 ? `override: cycle ${cycle.toFixed(0)} s, offset ${world ? world.offset_s.toFixed(1) : "?"} s`
+      : `map program: cycle ${prog.cycle_s.toFixed(0)} s, offset ${prog.offset_s} s`)));
+  if (world) box.append(lightTimeline(world));
+  if (idx < 0) {
+    box.append(h("button", { type: "button", onclick: () => safeEdit([{ path: ["lights"], append: { tls: prog.id, offset_s: 0.0 } }]) },
+      `Override ${prog.id}`));
+    return box;
+  }
+  const p = ["lights", idx];
+  const o = S.doc.lights[idx];
+  box.append(h("div", { class: "cells" }, cell("offset_s", [...p, "offset_s"], "number"), cell("start_phase", [...p, "start_phase"], "int"),
+    cell("phase_elapsed_s", [...p, "phase_elapsed_s"], "number")));
+  if (Array.isArray(o.phases)) {
+    box.append(rows("phases", [...p, "phases"], (ph) => [cell("duration_s", [...ph, "duration_s"], "number"),
+      cell("state", [...ph, "state"], "text", { placeholder: "e.g. GGrr" })],
+    () => ({ state: (o.phases[o.phases.length - 1] || prog.phases[0]).state, duration_s: 5.0 }), { inline: true, addLabel: "+ phase" }));
+    box.append(h("button", { type: "button", onclick: () => safeEdit([{ path: [...p, "phases"], delete: true }]) }, "Back to the map's phases"));
+  } else {
+    const copy = prog.phases.map((ph) => ({ state: ph.state, duration_s: ph.duration_s }));
+    box.append(h("button", { type: "button", onclick: () => safeEdit([{ path: [...p, "phases"], value: copy }]) }, "Edit phases (copy the map's)"));
+  }
+  box.append(...extras(o, ["tls", "offset_s", "start_phase", "phase_elapsed_s", "phases"], p),
+    h("button", { type: "button", onclick: () => safeEdit([{ path: ["lights", idx], delete: true }]) }, `Remove override of ${prog.id}`));
+  return box;
+}
+
+const VTYPES = ["car", "van", "truck", "bus", "motorcycle", "bicycle"];
+const DEPART = ["depart_lane", "depart_pos_m", "depart_speed", "max_speed_mps", "speed_factor"];
+
+function departCells(p) {
+  return [cell("depart_lane", [...p, "depart_lane"], "numkw", { placeholder: "best", list: "depart-lanes" }),
+    cell("depart_pos_m", [...p, "depart_pos_m"], "number"),
+    cell("depart_speed", [...p, "depart_speed"], "numkw", { placeholder: "max", list: "depart-speeds" }),
+    cell("max_speed_mps", [...p, "max_speed_mps"], "number"), cell("speed_factor", [...p, "speed_factor"], "number")];
+}
+
+function trafficForm() {
+  const tr = h("fieldset", { id: "traffic" }, h("legend", {}, "[traffic]"));
+  const t = S.doc.traffic;
+  tr.append(h("datalist", { id: "vtypes" }, ...VTYPES.map((v) => h("option", { value: v }))),
+    h("datalist", { id: "depart-lanes" }, ...["best", "random", "free", "first"].map((v) => h("option", { value: v }))),
+    h("datalist", { id: "depart-speeds" }, ...["max", "desired", "random"].map((v) => h("option", { value: v }))));
+  tr.append(field("mode", ["traffic", "mode"], ["", "sumo", "native", "none"]), field("warmup_s", ["traffic", "warmup_s"], "number"),
+    field("vtypes", ["traffic", "vtypes"], "text", { placeholder: "shipped vtypes.add.xml" }));
+  const pv = ["traffic", "vehicles"];
+  tr.append(rows("vehicles", pv, (p) => [cell("id", [...p, "id"], "text"), cell("vtype", [...p, "vtype"], "text", { list: "vtypes" }),
+    cell("depart_s", [...p, "depart_s"], "number"), ...departCells(p), idList("route", [...p, "route"], "edge", "passenger"),
+    ...extras(get(S.doc, p), ["id", "vtype", "route", "depart_s", ...DEPART], p, true)],
+  () => ({ id: `veh${((t && t.vehicles) || []).length}`, route: [] }), { addLabel: "+ vehicle" }));
+  const pf = ["traffic", "flows"];
+  tr.append(rows("flows", pf, (p, f) => {
+    const rate = f && "probability" in f ? "probability" : "vehs_per_hour";
+    const rateSel = h("select", { title: "exactly one of vehs_per_hour and probability" },
+      h("option", { value: "vehs_per_hour" }, "vehs_per_hour"), h("option", { value: "probability" }, "probability"));
+    rateSel.value = rate;
+    rateSel.addEventListener("change", () => {
+      const other = rateSel.value;
+      if (other === rate) return undefined;
+      return safeEdit([{ path: [...p, rate], delete: true }, { path: [...p, other], value: other === "probability" ? 0.1 : 300 }]);
+    });
+    const rateCell = h("div", { class: "field cell", "data-field": [...p, rate].join(".") }, rateSel, control([...p, rate], "number"));
+    return [cell("id", [...p, "id"], "text"), cell("vtype", [...p, "vtype"], "text", { list: "vtypes" }),
+      cell("from", [...p, "from"], "edge"), cell("to", [...p, "to"], "edge"), rateCell,
+      cell("begin_s", [...p, "begin_s"], "number"), cell("end_s", [...p, "end_s"], "number"), cell("number", [...p, "number"], "int"),
+      ...departCells(p), idList("via", [...p, "via"], "edge", "passenger"),
+      ...extras(f, ["id", "vtype", "from", "to", "via", "vehs_per_hour", "probability", "begin_s", "end_s", "number", ...DEPART], p, true)];
+  }, () => ({ id: `flow${((t && t.flows) || []).length}`, from: "", to: "", vehs_per_hour: 300 }), { addLabel: "+ flow" }));
+  const pr = ["traffic", "random"];
+  const rnd = get(S.doc, pr);
+  const rbox = h("div", { class: "rows", "data-rows": "traffic.random" });
+  if (!isObj(rnd)) {
+    rbox.append(h("div", { class: "rows-head" }, h("strong", {}, "random trips"),
+      h("button", { type: "button", class: "add", onclick: () => safeEdit([{ path: pr, value: { density_per_km: 10.0 }, table: true }]) }, "+ random trips")));
+  } else {
+    rbox.append(h("div", { class: "rows-head" }, h("strong", {}, "random trips"),
+      h("button", { type: "button", class: "del", title: "remove random trips", onclick: () => safeEdit([{ path: pr, delete: true }]) }, "×")));
+    const mix = isObj(rnd.mix) ? rnd.mix : {};
+    const name = h("input", { type: "text", placeholder: "vtype", list: "vtypes", size: 6 });
+    rbox.append(h("div", { class: "cells" }, cell("density_per_km", [...pr, "density_per_km"], "number"),
+      cell("within_m", [...pr, "within_m"], "number"), cell("min_route_m", [...pr, "min_route_m"], "number")),
+    h("div", { class: "rowcard mix", "data-field": "traffic.random.mix" }, h("span", { class: "idx" }, "mix"),
+      ...Object.keys(mix).map((k) => h("span", { class: "id" }, cell(k, [...pr, "mix", k], "number"),
+        h("button", { type: "button", class: "del", title: `remove ${k}`, onclick: () => safeEdit([{ path: [...pr, "mix", k], delete: true }]) }, "×"))),
+      name, h("button", { type: "button", onclick: () => name.value.trim() && safeEdit([{ path: [...pr, "mix", name.value.trim()], value: 1.0 }]) }, "+ vtype")),
+    ...extras(rnd, ["density_per_km", "within_m", "min_route_m", "mix"], pr));
+  }
+  tr.append(rbox);
+  if (isObj(t)) tr.append(...extras(t, ["mode", "warmup_s", "vtypes", "vehicles", "flows", "random"], ["traffic"]));
+  return tr;
 }
 
 function renderLights() {
@@ -644,36 +1081,13 @@ function renderLights() {
   box.replaceChildren(h("strong", {}, "Traffic lights"));
   if (!S.map || !S.doc) return;
   const overrides = S.doc.lights || [];
-  for (const prog of S.map.programs) {
-    const idx = overrides.findIndex((l) => l.tls === prog.id);
-    const phases = idx >= 0 && overrides[idx].phases ? overrides[idx].phases : prog.phases;
-    const cycle = phases.reduce((s, p) => s + p.duration_s, 0);
-    const bar = h("div", { class: "lightbar", title: "program over one cycle (map's or override's phases)" });
-    for (const p of phases) {
-      const st = p.state.toLowerCase();
-      const c = st.includes("g") ? LIGHT.green : st.includes("y") ? LIGHT.yellow : LIGHT.red;
-      bar.append(h("span", { style: `width:${(100 * p.duration_s) / cycle}%;background:${c}`, title: `${p.state} ${p.duration_s} s` }));
-    }
-    box.append(h("div", {}, `${prog.id}: cycle ${cycle.toFixed(0)} s, map offset ${prog.offset_s} s`), bar);
-    if (idx >= 0) {
-      const p = ["lights", idx];
-      box.append(field("offset_s", [...p, "offset_s"], "number"), field("start_phase", [...p, "start_phase"], "number"),
-        field("phase_elapsed_s", [...p, "phase_elapsed_s"], "number"), field("phases", [...p, "phases"], "json"),
-        h("button", { onclick: () => edit([{ path: ["lights", idx], delete: true }]) }, `Remove override of ${prog.id}`));
-    } else {
-      box.append(h("button", { onclick: () => edit([{ path: ["lights"], append: { tls: prog.id, offset_s: 0.0 } }]) },
-        `Override ${prog.id}`));
-    }
-  }
-  if (S.scene) {
-    const now = S.scene.lights.map((l) => `${l.lane}: ${l.color}`).join(", ");
-    box.append(h("div", { class: "help" }, `at t = ${S.scene.time_s.toFixed(2)} s (from the world): ${now}`));
-  }
-  const tr = h("fieldset", {}, h("legend", {}, "[traffic]"));
-  tr.append(field("mode", ["traffic", "mode"], ["", "sumo", "native", "none"]), field("warmup_s", ["traffic", "warmup_s"], "number"),
-    field("vehicles", ["traffic", "vehicles"], "json"), field("flows", ["traffic", "flows"], "json"),
-    field("random", ["traffic", "random"], "json"));
-  box.append(tr);
+  for (const prog of S.map.programs) box.append(lightForm(prog, overrides.findIndex((l) => l.tls === prog.id)));
+  // Overrides of lights the map lacks (the validator says so) stay editable.
+  overrides.forEach((o, i) => {
+    if (!S.map.programs.some((p) => p.id === o.tls)) box.append(field(`lights[${i}] (JSON)`, ["lights", i], "json"));
+  });
+  box.append(trafficForm());
+  updateNow();
 }
 
 function renderSummary() {
@@ -695,7 +1109,7 @@ function fieldPath(field) {
 }
 
 function showError() {
-  for (const el of document.querySelectorAll(".field.invalid")) el.classList.remove("invalid");
+  for (const el of document.querySelectorAll(".invalid")) el.classList.remove("invalid");
   for (const el of document.querySelectorAll(".field-error")) el.remove();
   const box = $("error-box");
   if (!S.error) {
@@ -706,12 +1120,15 @@ function showError() {
   box.textContent = S.error.message;
   if (!S.error.field) return;
   let p = fieldPath(S.error.field);
+  // The named key's input, else the nearest enclosing one (a row, a table) that has one.
   while (p) {
-    const input = document.querySelector(`[data-path="${CSS.escape(p)}"]`);
+    const q = CSS.escape(p);
+    const input = document.querySelector(`[data-path="${q}"], [data-row="${q}"], [data-rows="${q}"]`);
     if (input) {
-      const f = input.closest(".field");
+      const f = input.closest(".field") || input;
       f.classList.add("invalid");
       f.append(h("div", { class: "field-error" }, S.error.message));
+      f.scrollIntoView({ block: "nearest" });
       return;
     }
     p = p.includes(".") ? p.slice(0, p.lastIndexOf(".")) : "";
@@ -733,7 +1150,7 @@ async function preview() {
     S.scene = await api("/api/scene", body);
     $("time-out").textContent = S.scene.time_s.toFixed(2);
     draw();
-    renderLights();
+    updateNow();
     for (const view of ["front", "bev"]) {
       const r = await api("/api/frame", { ...body, view });
       const img = $(view);
@@ -785,6 +1202,7 @@ async function play() {
     $("time").value = String(st.time_s);
     $("time-out").textContent = st.time_s.toFixed(2);
     draw();
+    updateNow();
     await new Promise((r) => setTimeout(r, 40));
   }
   schedulePreview();
@@ -859,6 +1277,7 @@ $("btn-apply-text").addEventListener("click", async () => {
 });
 $("time").addEventListener("input", () => {
   $("time-out").textContent = Number($("time").value).toFixed(2);
+  updateNow();
   schedulePreview();
 });
 window.addEventListener("resize", draw);
