@@ -365,7 +365,11 @@ def test_edit_a_phase_row_and_save(page, server: str, workspace: Path) -> None:
     set_field(page, "lights.0.phases.0.state", state0[:-1])
     err = page.locator(".field.invalid[data-field='lights.0.phases.0.state'] .field-error")
     assert err.count() == 1
-    assert f"field `lights[0].phases[0].state` = {state0[:-1]}: has" in err.inner_text()
+    assert re.search(
+        rf'town01_01_midblock_crossing\.toml:\d+:\d+: field `lights\[0\]\.phases\[0\]\.state` = "{state0[:-1]}": '
+        rf"has {len(state0) - 1} characters",
+        err.inner_text(),
+    ), err.inner_text()
     set_field(page, "lights.0.phases.0.state", state0)
     assert page.is_hidden("#error-box"), page.inner_text("#error-box")
     page.fill("#saveas-path", "01_pedestrian/phases.toml")

@@ -620,6 +620,8 @@ function pick(help, vclass, apply) {
   setMode("pick");
   S.pick = { vclass: vclass === undefined ? "passenger" : vclass, apply };
   $("mode-help").textContent = help + " (Esc cancels)";
+  status(help);
+  canvas.scrollIntoView({ block: "nearest" });
 }
 
 // The keys a form shows of a table; any other key is edited as JSON (the fallback).
