@@ -408,14 +408,15 @@ def test_phase_timeline_now_marker_follows_the_slider(page, server: str) -> None
 
     def slide(t: float) -> None:
         page.eval_on_selector("#time", f"(el) => {{ el.value = '{t}'; el.dispatchEvent(new Event('input')); }}")
-        page.wait_for_function(f"Math.abs((window.editor.S.scene || {{time_s: -1}}).time_s - {t}) < 0.01")
+        # The scene is the world at the last decision at or before t.
+        page.wait_for_function(f"Math.abs((window.editor.S.scene || {{time_s: -1}}).time_s - {t}) < 0.3")
         idle(page)
 
     lefts = []
     for t, phase, color in [(2.0, 0, "red"), (7.0, 1, "green"), (12.0, 0, "red")]:
         slide(t)
         left = page.eval_on_selector(marker, "(el) => el.style.left")
-        assert float(left.rstrip("%")) == pytest.approx(100 * t / tmax, abs=1e-6)
+        assert float(left.rstrip("%")) == pytest.approx(100 * t / tmax, abs=1e-3)
         lefts.append(page.eval_on_selector(marker, "(el) => el.getBoundingClientRect().left"))
         # The schedule's phase at t, and the world's own colours of C's heads at t, agree.
         shown = page.inner_text(text)

@@ -106,6 +106,11 @@ def test_a_whole_number_over_a_float_stays_a_float() -> None:
     out = apply_edits(TRAFFIC, [{"path": ["lights", 0, "phases", 0], "value": {"state": "GGrr", "duration_s": 20}}])
     assert out == TRAFFIC.replace("duration_s = 30.0", "duration_s = 20.0")
     assert apply_edits(TEXT, [{"path": ["version"], "value": 2}]).startswith("version = 2   # schema")
+    # New keys from the page's float fields say so.
+    out = apply_edits(TEXT, [{"path": ["ego", "destination"], "value": {"lane": "C2T_1", "s": 200}, "floats": True}])
+    assert 'destination = { lane = "C2T_1", s = 200.0 }' in out
+    out = apply_edits(TEXT, [{"path": ["lights"], "append": {"tls": "C", "start_phase": 2}}])
+    assert out.endswith('[[lights]]\ntls = "C"\nstart_phase = 2\n')
 
 
 @pytest.mark.parametrize(

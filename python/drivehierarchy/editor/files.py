@@ -110,6 +110,14 @@ def _keep_float(current: Any, value: Any) -> Any:
     return value
 
 
+def _floats(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _floats(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_floats(v) for v in value]
+    return float(value) if isinstance(value, int) and not isinstance(value, bool) else value
+
+
 def doc_json(text: str) -> dict[str, Any] | None:
     """The TOML text as plain JSON-able data (None when it is no TOML)."""
     try:
@@ -131,7 +139,8 @@ def apply_edits(text: str, edits: list[dict[str, Any]]) -> str:
     "delete": true}` removes, `{"path": ["actors"], "append": {...}}` adds a table to an array
     of tables (created when missing) or a value to an array (`["actors", 0, "route", "lanes"]`);
     `"table": true` beside a table `value` writes a new key as a `[table]` of its own rather than
-    inline. Everything not named keeps its bytes."""
+    inline; `"floats": true` writes the value's whole numbers as floats (`0.0`: JSON, the page's
+    numbers, has no 0.0 apart from 0), except over an int already there. Everything not named keeps its bytes."""
     doc = tomlkit.parse(text)
     for e in edits:
         path = e.get("path")
@@ -151,7 +160,7 @@ def apply_edits(text: str, edits: list[dict[str, Any]]) -> str:
                 raise ValueError(f"edit of `{where}`: {exc}") from exc
         last = path[-1]
         if "append" in e:
-            value = e["append"]
+            value = _floats(e["append"]) if e.get("floats") else e["append"]
             if isinstance(parent, (Table, tomlkit.TOMLDocument)) and last not in parent:
                 if not isinstance(value, dict):
                     raise ValueError(f"edit of `{where}`: no array here to append to")
@@ -179,6 +188,9 @@ def apply_edits(text: str, edits: list[dict[str, Any]]) -> str:
             current = parent.get(last) if isinstance(parent, dict) else None
             if isinstance(parent, list) and isinstance(last, int) and -len(parent) <= last < len(parent):
                 current = parent[last]
+            # A whole number typed over an int stays an int (`vehs_per_hour = 450`).
+            if e.get("floats") and not (isinstance(current, int) and not isinstance(current, bool)):
+                value = _floats(value)
             value = _keep_float(current, value)
             if isinstance(current, InlineTable) and isinstance(value, dict) and set(current) == set(value):
                 # Same keys in place: the table keeps its layout, only changed values differ.

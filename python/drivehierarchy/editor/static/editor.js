@@ -415,7 +415,7 @@ window.addEventListener("mouseup", async (ev) => {
     const hit = await snap(x, y, "passenger", false);
     const i = d.handle.actor;
     const of = hit.lane ? { lane: hit.lane, s: hit.s } : [round(x), round(y)];
-    await edit([{ path: ["actors", i, "start", "of"], value: of }]);
+    await edit([{ path: ["actors", i, "start", "of"], value: of, floats: true }]);
     return;
   }
   if (d.pan && !d.moved && ev.target === canvas) {
@@ -470,11 +470,11 @@ canvas.addEventListener("click", async (ev) => {
     const hit = await snap(x, y, "passenger", false);
     if (!hit.lane) return status("no drivable lane there", "bad");
     const key = S.mode === "ego-start" ? "start" : "destination";
-    await edit([{ path: ["ego", key], value: { lane: hit.lane, s: hit.s } }]);
+    await edit([{ path: ["ego", key], value: { lane: hit.lane, s: hit.s }, floats: true }]);
   } else if (S.mode === "obstacle") {
     const hit = await snap(x, y, null, false);
     if (!hit.lane) return status("no lane there", "bad");
-    await edit([{ path: ["obstacles"], append: { kind: $("obstacle-kind").value, at: { lane: hit.lane, s: hit.s } } }]);
+    await edit([{ path: ["obstacles"], append: { kind: $("obstacle-kind").value, at: { lane: hit.lane, s: hit.s } }, floats: true }]);
   } else if (S.mode === "actor") {
     const kind = $("actor-kind").value;
     const hit = await snap(x, y, vclassFor(kind), false);
@@ -507,7 +507,7 @@ async function finishActor() {
     actor.waypoints = pts.map((p) => ({ lane: p.lane, s: p.s }));
   }
   S.pending = [];
-  await edit([{ path: ["actors"], append: actor }]);
+  await edit([{ path: ["actors"], append: actor, floats: true }]);
   S.selected = n;
   setMode("select");
   renderForm();
@@ -587,7 +587,7 @@ function control(path, kind, opts) {
     if (raw === "") return safeEdit([{ path, delete: true }]);
     const v = parseValue(raw, kind, path);
     if (v === undefined) return;
-    await safeEdit([{ path, value: v }]);
+    await safeEdit([{ path, value: v, floats: kind === "number" }]);
   });
   if (kind !== "lane" && kind !== "edge") return input;
   const pickBtn = h("button", {
@@ -643,8 +643,9 @@ function rows(title, path, cells, fresh, opts) {
       const v = fresh();
       if (v === undefined) return undefined;
       // A new inline array is written as a value; `[[...]]` tables and existing arrays get a row.
-      if (Array.isArray(items) || !opts.inline) return safeEdit([{ path, append: v }]);
-      return safeEdit([{ path, value: [v] }]);
+      const floats = !!opts.floats;
+      if (Array.isArray(items) || !opts.inline) return safeEdit([{ path, append: v, floats }]);
+      return safeEdit([{ path, value: [v], floats }]);
     },
   }, opts.addLabel || "+ add");
   box.append(h("div", { class: "rows-head" }, h("strong", {}, title), add));
@@ -713,7 +714,7 @@ function placeField(label, path, opts) {
       const hit = await snap(x, y, opts.vclass === undefined ? "passenger" : opts.vclass, false).catch(() => null);
       nv = hit && hit.lane ? { lane: hit.lane, s: hit.s } : { lane: "", s: 0.0 };
     }
-    await safeEdit([{ path, value: nv }]);
+    await safeEdit([{ path, value: nv, floats: true }]);
   });
   const pickBtn = h("button", {
     type: "button", class: "pick", title: "place it by clicking the map",
@@ -728,7 +729,7 @@ function placeField(label, path, opts) {
         if (isObj(v) && v.yaw_deg !== undefined) nv.yaw_deg = v.yaw_deg;
         if (opts.keep) for (const key of opts.keep) if (isObj(v) && v[key] !== undefined) nv[key] = v[key];
       }
-      return safeEdit([{ path, value: nv }]);
+      return safeEdit([{ path, value: nv, floats: true }]);
     }),
   }, "⌖");
   const head = h("div", { class: "field place-head", "data-field": path.join(".") }, h("label", {}, label),
@@ -797,7 +798,7 @@ function triggerFields(i, prefix, t, choices) {
       gap_held_s: { gap_held_s: 3.0 },
     }[k];
     if (isBrake && keep.decel_mps2 === undefined) keep.decel_mps2 = 6.0;
-    await safeEdit([{ path: prefix, value: { ...v, ...keep } }]);
+    await safeEdit([{ path: prefix, value: { ...v, ...keep }, floats: true }]);
   });
   box.append(h("div", { class: "field", "data-field": prefix.join(".") }, h("label", {}, isBrake ? "brake when" : "start when"), sel));
   if (!kind) return box;
@@ -823,8 +824,8 @@ function paceFields(p, pace) {
   const box = h("div", { class: "pace" });
   if (!isObj(pace)) {
     box.append(h("div", { class: "row" }, h("span", { class: "help" }, "pace: none"),
-      h("button", { type: "button", onclick: () => safeEdit([{ path: p, value: { gap_s: 1.5, gap_m: 2.0, min_speed_mps: 1.0 } }]) }, "+ gap pace"),
-      h("button", { type: "button", onclick: () => safeEdit([{ path: p, value: { meet: defaultPlace() === "actor_self" ? [0.0, 0.0] : defaultPlace(), offset_s: 0.0 } }]) }, "+ meet pace")));
+      h("button", { type: "button", onclick: () => safeEdit([{ path: p, value: { gap_s: 1.5, gap_m: 2.0, min_speed_mps: 1.0 }, floats: true }]) }, "+ gap pace"),
+      h("button", { type: "button", onclick: () => safeEdit([{ path: p, value: { meet: defaultPlace() === "actor_self" ? [0.0, 0.0] : defaultPlace(), offset_s: 0.0 }, floats: true }]) }, "+ meet pace")));
     return box;
   }
   const meet = "meet" in pace;
@@ -872,7 +873,7 @@ function actorForm(a, i) {
       () => {
         const last = (a.waypoints || [])[a.waypoints.length - 1];
         return isObj(last) && last.lane ? { lane: last.lane, s: round((last.s || 0) + 10) } : { x: 0.0, y: 0.0 };
-      }, { inline: true, addLabel: "+ waypoint" }));
+      }, { inline: true, floats: true, addLabel: "+ waypoint" }));
   }
   if ("route" in a) fs.append(routeFields([...p, "route"], a.route, vclass));
   fs.append(triggerFields(i, [...p, "start"], a.start, TRIGGERS));
@@ -881,7 +882,7 @@ function actorForm(a, i) {
   if ("route" in a || "lane_changes" in a) {
     fs.append(rows("lane_changes", [...p, "lane_changes"], (lc) => [cell("at_s", [...lc, "at_s"], "number"),
       cell("to_lane", [...lc, "to_lane"], "lane", { vclass }), cell("length_m", [...lc, "length_m"], "number")],
-    () => ({ at_s: 20.0, to_lane: "", length_m: 20.0 }), { inline: true, addLabel: "+ lane change" }));
+    () => ({ at_s: 20.0, to_lane: "", length_m: 20.0 }), { inline: true, floats: true, addLabel: "+ lane change" }));
   }
   fs.append(...extras(a, ACTOR_KEYS, p));
   fs.append(h("button", { type: "button", onclick: () => safeEdit([{ path: ["actors", i], delete: true }]) }, "Delete actor"));
@@ -991,7 +992,7 @@ function lightForm(prog, idx) {
       : `map program: cycle ${prog.cycle_s.toFixed(0)} s, offset ${prog.offset_s} s`)));
   if (world) box.append(lightTimeline(world));
   if (idx < 0) {
-    box.append(h("button", { type: "button", onclick: () => safeEdit([{ path: ["lights"], append: { tls: prog.id, offset_s: 0.0 } }]) },
+    box.append(h("button", { type: "button", onclick: () => safeEdit([{ path: ["lights"], append: { tls: prog.id, offset_s: 0.0 }, floats: true }]) },
       `Override ${prog.id}`));
     return box;
   }
@@ -1002,11 +1003,11 @@ function lightForm(prog, idx) {
   if (Array.isArray(o.phases)) {
     box.append(rows("phases", [...p, "phases"], (ph) => [cell("duration_s", [...ph, "duration_s"], "number"),
       cell("state", [...ph, "state"], "text", { placeholder: "e.g. GGrr" })],
-    () => ({ state: (o.phases[o.phases.length - 1] || prog.phases[0]).state, duration_s: 5.0 }), { inline: true, addLabel: "+ phase" }));
+    () => ({ state: (o.phases[o.phases.length - 1] || prog.phases[0]).state, duration_s: 5.0 }), { inline: true, floats: true, addLabel: "+ phase" }));
     box.append(h("button", { type: "button", onclick: () => safeEdit([{ path: [...p, "phases"], delete: true }]) }, "Back to the map's phases"));
   } else {
     const copy = prog.phases.map((ph) => ({ state: ph.state, duration_s: ph.duration_s }));
-    box.append(h("button", { type: "button", onclick: () => safeEdit([{ path: [...p, "phases"], value: copy }]) }, "Edit phases (copy the map's)"));
+    box.append(h("button", { type: "button", onclick: () => safeEdit([{ path: [...p, "phases"], value: copy, floats: true }]) }, "Edit phases (copy the map's)"));
   }
   box.append(...extras(o, ["tls", "offset_s", "start_phase", "phase_elapsed_s", "phases"], p),
     h("button", { type: "button", onclick: () => safeEdit([{ path: ["lights", idx], delete: true }]) }, `Remove override of ${prog.id}`));
@@ -1059,7 +1060,7 @@ function trafficForm() {
   const rbox = h("div", { class: "rows", "data-rows": "traffic.random" });
   if (!isObj(rnd)) {
     rbox.append(h("div", { class: "rows-head" }, h("strong", {}, "random trips"),
-      h("button", { type: "button", class: "add", onclick: () => safeEdit([{ path: pr, value: { density_per_km: 10.0 }, table: true }]) }, "+ random trips")));
+      h("button", { type: "button", class: "add", onclick: () => safeEdit([{ path: pr, value: { density_per_km: 10.0 }, table: true, floats: true }]) }, "+ random trips")));
   } else {
     rbox.append(h("div", { class: "rows-head" }, h("strong", {}, "random trips"),
       h("button", { type: "button", class: "del", title: "remove random trips", onclick: () => safeEdit([{ path: pr, delete: true }]) }, "×")));
@@ -1070,7 +1071,7 @@ function trafficForm() {
     h("div", { class: "rowcard mix", "data-field": "traffic.random.mix" }, h("span", { class: "idx" }, "mix"),
       ...Object.keys(mix).map((k) => h("span", { class: "id" }, cell(k, [...pr, "mix", k], "number"),
         h("button", { type: "button", class: "del", title: `remove ${k}`, onclick: () => safeEdit([{ path: [...pr, "mix", k], delete: true }]) }, "×"))),
-      name, h("button", { type: "button", onclick: () => name.value.trim() && safeEdit([{ path: [...pr, "mix", name.value.trim()], value: 1.0 }]) }, "+ vtype")),
+      name, h("button", { type: "button", onclick: () => name.value.trim() && safeEdit([{ path: [...pr, "mix", name.value.trim()], value: 1.0, floats: true }]) }, "+ vtype")),
     ...extras(rnd, ["density_per_km", "within_m", "min_route_m", "mix"], pr));
   }
   tr.append(rbox);
