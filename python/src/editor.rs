@@ -180,7 +180,12 @@ fn lights_json(s: &ResolvedScenario, horizon_s: f64) -> Vec<Value> {
                 Some(l) => l.clone(),
                 None => {
                     let l = s.map.tl_logic(id)?;
-                    LightProgram { tl_id: l.id.clone(), offset_s: l.offset_s, phases: l.phases.clone(), replaced: false }
+                    LightProgram {
+                        tl_id: l.id.clone(),
+                        offset_s: l.offset_s,
+                        phases: l.phases.clone(),
+                        replaced: false,
+                    }
                 }
             };
             let mut schedule = Vec::new();

@@ -323,7 +323,10 @@ def test_add_a_flow_row_then_remove_it(page, server: str, workspace: Path) -> No
     assert page.is_hidden("#error-box"), page.inner_text("#error-box")
     added = page.evaluate("window.editor.S.text")
     assert added.startswith(text)
-    assert added[len(text) :] == '\n[[traffic.flows]]\nid = "flow2"\nfrom = "T2C"\nto = "C2W"\nvehs_per_hour = 300\n'
+    assert (
+        added[len(text) :]
+        == '\n[[traffic.flows]]\nid = "flow2"\nfrom = "T2C"\nto = "C2W"\nvehs_per_hour = 300\n'
+    )
     page.click("[data-row='traffic.flows.2'] button.del")
     idle(page)
     assert page.evaluate("window.editor.S.text") == text
@@ -336,7 +339,8 @@ def test_invalid_row_value_shows_the_validators_message_at_that_rows_field(page,
     err = page.locator(".field.invalid[data-field='traffic.flows.0.vehs_per_hour'] .field-error")
     assert err.count() == 1
     assert re.search(
-        r"town01_09_behind_left_turner\.toml:52:\d+: field `traffic\.flows\[0\]\.vehs_per_hour` = -5: must be",
+        r"town01_09_behind_left_turner\.toml:52:\d+: "
+        r"field `traffic\.flows\[0\]\.vehs_per_hour` = -5: must be",
         err.inner_text(),
     ), err.inner_text()
     # Only that row's field is marked; Save refuses the buffer.
@@ -366,7 +370,8 @@ def test_edit_a_phase_row_and_save(page, server: str, workspace: Path) -> None:
     err = page.locator(".field.invalid[data-field='lights.0.phases.0.state'] .field-error")
     assert err.count() == 1
     assert re.search(
-        rf'town01_01_midblock_crossing\.toml:\d+:\d+: field `lights\[0\]\.phases\[0\]\.state` = "{state0[:-1]}": '
+        r"town01_01_midblock_crossing\.toml:\d+:\d+: "
+        rf'field `lights\[0\]\.phases\[0\]\.state` = "{state0[:-1]}": '
         rf"has {len(state0) - 1} characters",
         err.inner_text(),
     ), err.inner_text()
@@ -407,7 +412,9 @@ def test_phase_timeline_now_marker_follows_the_slider(page, server: str) -> None
     text = ".now-text[data-tls='C']"
 
     def slide(t: float) -> None:
-        page.eval_on_selector("#time", f"(el) => {{ el.value = '{t}'; el.dispatchEvent(new Event('input')); }}")
+        page.eval_on_selector(
+            "#time", f"(el) => {{ el.value = '{t}'; el.dispatchEvent(new Event('input')); }}"
+        )
         # The scene is the world at the last decision at or before t.
         page.wait_for_function(f"Math.abs((window.editor.S.scene || {{time_s: -1}}).time_s - {t}) < 0.3")
         idle(page)

@@ -79,19 +79,28 @@ def test_row_edits_of_the_forms_keep_the_rest() -> None:
     assert one == TRAFFIC.replace('to = "E2"', 'to = "E3"')
     one = apply_edits(TRAFFIC, [{"path": ["lights", 0, "phases", 1, "duration_s"], "value": 4.0}])
     assert one == TRAFFIC.replace("duration_s = 3.0 },  # yellow", "duration_s = 4.0 },  # yellow")
-    more = apply_edits(TRAFFIC, [{"path": ["lights", 0, "phases"], "append": {"state": "rrGG", "duration_s": 9.0}}])
-    assert more == TRAFFIC.replace(
-        "  # yellow\n]", '  # yellow\n  { state = "rrGG", duration_s = 9.0 },\n]'
+    more = apply_edits(
+        TRAFFIC, [{"path": ["lights", 0, "phases"], "append": {"state": "rrGG", "duration_s": 9.0}}]
     )
+    assert more == TRAFFIC.replace("  # yellow\n]", '  # yellow\n  { state = "rrGG", duration_s = 9.0 },\n]')
     less = apply_edits(TRAFFIC, [{"path": ["lights", 0, "phases", 0], "delete": True}])
     assert less == TRAFFIC.replace('  { state = "GGrr", duration_s = 30.0 },\n', "")
-    flows = apply_edits(TRAFFIC, [{"path": ["traffic", "flows"], "append": {"id": "b", "vehs_per_hour": 300}}])
+    flows = apply_edits(
+        TRAFFIC, [{"path": ["traffic", "flows"], "append": {"id": "b", "vehs_per_hour": 300}}]
+    )
     assert flows == TRAFFIC + '\n[[traffic.flows]]\nid = "b"\nvehs_per_hour = 300\n'
     assert apply_edits(flows, [{"path": ["traffic", "flows", 1], "delete": True}]) == TRAFFIC
     via = apply_edits(TRAFFIC, [{"path": ["traffic", "flows", 0, "route_hint"], "append": "E5"}])
     assert via == TRAFFIC.replace('route_hint = ["E1"]', 'route_hint = ["E1", "E5"]')
     rnd = apply_edits(
-        TRAFFIC, [{"path": ["traffic", "random"], "value": {"density_per_km": 8.0, "mix": {"car": 1.0}}, "table": True}]
+        TRAFFIC,
+        [
+            {
+                "path": ["traffic", "random"],
+                "value": {"density_per_km": 8.0, "mix": {"car": 1.0}},
+                "table": True,
+            }
+        ],
     )
     assert rnd == TRAFFIC + "\n[traffic.random]\ndensity_per_km = 8.0\nmix = { car = 1.0 }\n"
     with pytest.raises(ValueError, match="array of tables takes a table"):
@@ -103,11 +112,15 @@ def test_row_edits_of_the_forms_keep_the_rest() -> None:
 def test_a_whole_number_over_a_float_stays_a_float() -> None:
     # The page's numbers are JSON: 45 may stand for 45.0, which the file keeps.
     assert apply_edits(TEXT, [{"path": ["ego", "start", "s"], "value": 45}]) == TEXT.replace("30.0", "45.0")
-    out = apply_edits(TRAFFIC, [{"path": ["lights", 0, "phases", 0], "value": {"state": "GGrr", "duration_s": 20}}])
+    out = apply_edits(
+        TRAFFIC, [{"path": ["lights", 0, "phases", 0], "value": {"state": "GGrr", "duration_s": 20}}]
+    )
     assert out == TRAFFIC.replace("duration_s = 30.0", "duration_s = 20.0")
     assert apply_edits(TEXT, [{"path": ["version"], "value": 2}]).startswith("version = 2   # schema")
     # New keys from the page's float fields say so.
-    out = apply_edits(TEXT, [{"path": ["ego", "destination"], "value": {"lane": "C2T_1", "s": 200}, "floats": True}])
+    out = apply_edits(
+        TEXT, [{"path": ["ego", "destination"], "value": {"lane": "C2T_1", "s": 200}, "floats": True}]
+    )
     assert 'destination = { lane = "C2T_1", s = 200.0 }' in out
     out = apply_edits(TEXT, [{"path": ["lights"], "append": {"tls": "C", "start_phase": 2}}])
     assert out.endswith('[[lights]]\ntls = "C"\nstart_phase = 2\n')

@@ -140,7 +140,8 @@ def apply_edits(text: str, edits: list[dict[str, Any]]) -> str:
     of tables (created when missing) or a value to an array (`["actors", 0, "route", "lanes"]`);
     `"table": true` beside a table `value` writes a new key as a `[table]` of its own rather than
     inline; `"floats": true` writes the value's whole numbers as floats (`0.0`: JSON, the page's
-    numbers, has no 0.0 apart from 0), except over an int already there. Everything not named keeps its bytes."""
+    numbers, has no 0.0 apart from 0), except over an int already there. Everything not named
+    keeps its bytes."""
     doc = tomlkit.parse(text)
     for e in edits:
         path = e.get("path")
