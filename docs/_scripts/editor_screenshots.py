@@ -17,6 +17,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
 SCENARIO = "01_pedestrian/town01_01_midblock_crossing.toml"
+TRAFFIC = "04_intersection/town01_09_behind_left_turner.toml"
 
 
 def main() -> int:
@@ -57,6 +58,14 @@ def main() -> int:
             page.press("[data-path='actors.0.speed_mps']", "Tab")
             page.wait_for_function(idle)
             page.locator("fieldset[data-actor='0']").screenshot(path=str(args.out / "editor_validation.png"))
+            # Lights over time and background traffic: a scenario with flows through light C.
+            page.goto(url + "#" + TRAFFIC)
+            page.reload()
+            page.wait_for_function(idle)
+            page.eval_on_selector("#time", set_time)
+            page.wait_for_function("Number(document.getElementById('front').dataset.time) > 13.7")
+            page.wait_for_function(idle)
+            page.locator("#lights").screenshot(path=str(args.out / "editor_lights_traffic.png"))
             browser.close()
     finally:
         proc.terminate()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 from pathlib import Path
 
@@ -100,6 +101,34 @@ def test_load_gives_the_worlds_geometry(client) -> None:
     assert len(geo["ego"]["route"]) >= 2
     ped = geo["actors"][0]
     assert ped["kind"] == "pedestrian" and ped["motion"]["trigger"]["kind"] == "ego_eta"
+
+
+def test_light_programs_over_time_come_from_the_world(client) -> None:
+    """The light timeline's schedule: the map's program of town01's C (phases ending at 37, 42,
+    45, 82, 87, 90 s), shifted by an override's `offset_s`, or started in its `start_phase`."""
+    text = client.get("/api/file", params={"path": PED}).json()["text"]
+
+    def light_c(extra: str) -> dict:
+        d = client.post("/api/validate", json={"path": PED, "text": text + extra}, headers=ORIGIN).json()
+        assert d["ok"], d
+        return next(lt for lt in d["geometry"]["lights"] if lt["tl_id"] == "C")
+
+    duration = client.get("/api/file", params={"path": PED}).json()["geometry"]["scenario_duration_s"]
+
+    plain = light_c("")
+    assert not plain["overridden"] and plain["cycle_s"] == 90.0
+    assert plain["schedule"][:3] == [[0.0, 37.0, 0], [37.0, 42.0, 1], [42.0, 45.0, 2]]
+    # The schedule spans the episode's timeout (2 × the scenario duration), phases back to back.
+    sched = plain["schedule"]
+    assert all(a[1] == pytest.approx(b[0]) for a, b in itertools.pairwise(sched))
+    assert sched[-1][1] == pytest.approx(2 * duration)
+    # At t = 0 the shifted program is at (0 − 12) mod 90 = 78 s: phase 3, which ends at 82.
+    shifted = light_c('\n[[lights]]\ntls = "C"\noffset_s = 12.0\n')
+    assert shifted["overridden"] and shifted["schedule"][:2] == [[0.0, 4.0, 3], [4.0, 9.0, 4]]
+    started = light_c('\n[[lights]]\ntls = "C"\nstart_phase = 2\nphase_elapsed_s = 1.0\n')
+    assert started["schedule"][0] == [0.0, pytest.approx(2.0), 2]
+    own = light_c('\n[[lights]]\ntls = "C"\nphases = [{ state = "' + "r" * 20 + '", duration_s = 4.0 }]\n')
+    assert own["phases"] == [{"duration_s": 4.0, "state": "r" * 20}] and own["schedule"][1] == [4.0, 8.0, 0]
 
 
 def test_map_geometry_and_snap(client) -> None:

@@ -596,7 +596,7 @@ function control(path, kind, opts) {
       const id = kind === "lane" ? hit.lane : laneEdge(hit.lane);
       return safeEdit([{ path, value: id }]);
     }),
-  }, "⌖");
+  }, "map");
   return h("span", { class: "with-pick" }, input, pickBtn);
 }
 
@@ -679,7 +679,7 @@ function idList(label, path, kind, vclass) {
       const id = kind === "lane" ? hit.lane : laneEdge(hit.lane);
       return safeEdit([Array.isArray(items) ? { path, append: id } : { path, value: [id] }]);
     }),
-  }, `+ ${kind} ⌖`));
+  }, `+ ${kind} (map)`));
   box.append(line);
   return box;
 }
@@ -731,7 +731,7 @@ function placeField(label, path, opts) {
       }
       return safeEdit([{ path, value: nv, floats: true }]);
     }),
-  }, "⌖");
+  }, "map");
   const head = h("div", { class: "field place-head", "data-field": path.join(".") }, h("label", {}, label),
     h("span", { class: "with-pick" }, sel, pickBtn));
   const cells = h("div", { class: "cells" });
