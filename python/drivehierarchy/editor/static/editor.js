@@ -549,7 +549,7 @@ function parseValue(raw, kind, path) {
     const v = Number(raw);
     return Number.isFinite(v) ? v : raw; // the validator says what is wrong
   }
-  if (kind === "numkw") {
+  if (kind === "numkw" || kind === "laneindex") {
     // A number or a keyword (`depart_lane = 1` or `"best"`).
     const v = Number(raw);
     return raw !== "" && Number.isFinite(v) ? v : raw;
@@ -565,8 +565,8 @@ function parseValue(raw, kind, path) {
   return raw;
 }
 
-// One control bound to a key path. kind: "number", "int", "numkw", "text", "json", "lane",
-// "edge" (text with a pick-on-the-map button) or a list of choices. An emptied input deletes
+// One control bound to a key path. kind: "number", "int", "numkw" (number or keyword), "text",
+// "json", "lane", "edge", "laneindex" (with a pick-on-the-map button) or a list of choices. An emptied input deletes
 // the key (its default applies).
 function control(path, kind, opts) {
   opts = opts || {};
@@ -589,11 +589,12 @@ function control(path, kind, opts) {
     if (v === undefined) return;
     await safeEdit([{ path, value: v, floats: kind === "number" }]);
   });
-  if (kind !== "lane" && kind !== "edge") return input;
+  if (kind !== "lane" && kind !== "edge" && kind !== "laneindex") return input;
   const pickBtn = h("button", {
-    class: "pick", type: "button", title: `pick the ${kind} on the map`,
+    class: "pick", type: "button", title: `pick the ${kind === "laneindex" ? "lane" : kind} on the map`,
     onclick: () => pick(`${path.join(".")}: click a lane`, opts.vclass, (hit) => {
-      const id = kind === "lane" ? hit.lane : laneEdge(hit.lane);
+      const lane = S.map.lanes.find((x) => x.id === hit.lane);
+      const id = kind === "lane" ? hit.lane : kind === "edge" ? laneEdge(hit.lane) : lane && lane.index;
       return safeEdit([{ path, value: id }]);
     }),
   }, "map");
@@ -1018,7 +1019,8 @@ const VTYPES = ["car", "van", "truck", "bus", "motorcycle", "bicycle"];
 const DEPART = ["depart_lane", "depart_pos_m", "depart_speed", "max_speed_mps", "speed_factor"];
 
 function departCells(p) {
-  return [cell("depart_lane", [...p, "depart_lane"], "numkw", { placeholder: "best", list: "depart-lanes" }),
+  // depart_lane: an index of the first edge's lanes (picked on the map) or a keyword.
+  return [cell("depart_lane", [...p, "depart_lane"], "laneindex", { placeholder: "best", list: "depart-lanes" }),
     cell("depart_pos_m", [...p, "depart_pos_m"], "number"),
     cell("depart_speed", [...p, "depart_speed"], "numkw", { placeholder: "max", list: "depart-speeds" }),
     cell("max_speed_mps", [...p, "max_speed_mps"], "number"), cell("speed_factor", [...p, "speed_factor"], "number")];
