@@ -431,3 +431,20 @@ def test_phase_timeline_now_marker_follows_the_slider(page, server: str) -> None
         world = re.findall(r"\S+ (red|green|yellow|off)", shown.split("world:")[1])
         assert world and set(world) == {color}, shown
     assert lefts[0] < lefts[1] < lefts[2]
+
+
+def test_suite_files_open_in_forms_with_no_json_fallback(page, server: str, workspace: Path) -> None:
+    """Every key of these suite files has a form (JSON fields are for keys the forms do not know);
+    the page fixture fails the test on any script error."""
+    files = sorted(
+        p.relative_to(workspace / "r4").as_posix() for p in (workspace / "r4").rglob("town01_*.toml")
+    )
+    assert len(files) >= 5
+    for f in files:
+        page.goto(server + "#" + f)
+        page.reload()
+        idle(page)
+        assert page.evaluate("window.editor.S.error") is None, f
+        labels = page.eval_on_selector_all("label", "els => els.map((e) => e.textContent)")
+        assert not [x for x in labels if "(JSON)" in x], (f, labels)
+        assert page.locator("[data-path='ego.start.lane']").count() == 1, f

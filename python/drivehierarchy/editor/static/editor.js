@@ -611,6 +611,22 @@ function cell(label, path, kind, opts) {
   return field(label, path, kind, { ...(opts || {}), cell: true });
 }
 
+// `color = [r, g, b]` as a colour picker (absent: the default by kind / palette; × clears it).
+function colorField(label, path) {
+  const v = get(S.doc, path);
+  const hex = (c) => "#" + c.map((x) => Math.max(0, Math.min(255, Number(x) | 0)).toString(16).padStart(2, "0")).join("");
+  const input = h("input", { type: "color", value: Array.isArray(v) && v.length === 3 ? hex(v) : "#808080" });
+  input.dataset.path = path.join(".");
+  input.addEventListener("change", () => {
+    const x = input.value;
+    const rgb = [1, 3, 5].map((i) => parseInt(x.slice(i, i + 2), 16));
+    return safeEdit([{ path, value: rgb }]);
+  });
+  const clear = v === undefined ? h("span", { class: "help" }, "default")
+    : h("button", { type: "button", class: "del", title: "back to the default colour", onclick: () => safeEdit([{ path, delete: true }]) }, "×");
+  return h("div", { class: "field cell", "data-field": path.join(".") }, h("label", {}, label), h("span", { class: "with-pick" }, input, clear));
+}
+
 function laneEdge(lane) {
   const l = S.map && S.map.lanes.find((x) => x.id === lane);
   return l ? l.edge : lane;
@@ -855,7 +871,7 @@ function routeFields(p, route, vclass) {
 }
 
 const ACTOR_KEYS = ["name", "kind", "speed_mps", "accel_mps2", "initial_speed_mps", "at_end", "waypoints", "route", "start", "brake",
-  "pace", "lane_changes", "behavior", "at", "length_m", "width_m", "height_m"];
+  "pace", "lane_changes", "behavior", "at", "length_m", "width_m", "height_m", "color"];
 
 function actorForm(a, i) {
   const fs = h("fieldset", { "data-actor": i, class: S.selected === i ? "selected" : "" },
@@ -866,7 +882,8 @@ function actorForm(a, i) {
     field("kind", [...p, "kind"], ["car", "bus", "truck", "motorcycle", "cyclist", "pedestrian"]),
     h("div", { class: "cells" }, cell("speed_mps", [...p, "speed_mps"], "number"), cell("accel_mps2", [...p, "accel_mps2"], "number"),
       cell("initial_speed_mps", [...p, "initial_speed_mps"], "number"), cell("at_end", [...p, "at_end"], ["", "stop", "remove"]),
-      cell("length_m", [...p, "length_m"], "number"), cell("width_m", [...p, "width_m"], "number"), cell("height_m", [...p, "height_m"], "number")));
+      cell("length_m", [...p, "length_m"], "number"), cell("width_m", [...p, "width_m"], "number"), cell("height_m", [...p, "height_m"], "number"),
+      colorField("color", [...p, "color"])));
   if ("behavior" in a) fs.append(field("behavior", [...p, "behavior"], ["scripted", "external"]));
   if ("at" in a) fs.append(placeField("at", [...p, "at"], { vclass }));
   if ("waypoints" in a) {
@@ -901,7 +918,7 @@ function renderForm() {
     field("reference_duration_s", ["reference_duration_s"], "number"), field("duration_s", ["duration_s"], "number"),
     field("seed", ["seed"], "int"));
   gen.append(...extras(S.doc, ["version", "id", "name", "category", "description", "map", "reference_duration_s", "duration_s",
-    "seed", "ego", "actors", "obstacles", "lights", "traffic"], []));
+    "seed", "ego", "actors", "obstacles", "lights", "traffic", "signs"], []));
   const ego = h("fieldset", {}, h("legend", {}, "Ego"));
   const egoPoint = (key) => () => {
     if (!S.geo) return null;
@@ -910,7 +927,8 @@ function renderForm() {
   ego.append(placeField("start", ["ego", "start"], { point: egoPoint("start") }),
     placeField("destination", ["ego", "destination"], { point: egoPoint("destination") }),
     idList("route_edges", ["ego", "route_edges"], "edge", "passenger"), field("speed_mps", ["ego", "speed_mps"], "number"));
-  ego.append(...extras(S.doc.ego, ["start", "destination", "route_edges", "speed_mps"], ["ego"]));
+  ego.append(h("div", { class: "cells" }, colorField("color", ["ego", "color"])));
+  ego.append(...extras(S.doc.ego, ["start", "destination", "route_edges", "speed_mps", "color"], ["ego"]));
   form.append(gen, ego);
   (S.doc.actors || []).forEach((a, i) => form.append(actorForm(a, i)));
   (S.doc.obstacles || []).forEach((o, i) => {
@@ -918,10 +936,17 @@ function renderForm() {
     const p = ["obstacles", i];
     fs.append(field("kind", [...p, "kind"], ["cone", "barrier", "static_object", "car", "bus", "truck", "motorcycle", "cyclist", "pedestrian"]),
       placeField("at", [...p, "at"], { vclass: null }), field("name", [...p, "name"], "text"),
-      ...extras(o, ["kind", "at", "name"], p),
+      h("div", { class: "cells" }, cell("length_m", [...p, "length_m"], "number"), cell("width_m", [...p, "width_m"], "number"),
+        cell("height_m", [...p, "height_m"], "number"), colorField("color", [...p, "color"])),
+      ...extras(o, ["kind", "at", "name", "length_m", "width_m", "height_m", "color"], p),
       h("button", { type: "button", onclick: () => safeEdit([{ path: ["obstacles", i], delete: true }]) }, "Delete obstacle"));
     form.append(fs);
   });
+  const signs = h("fieldset", {}, h("legend", {}, "[[signs]]"));
+  signs.append(rows("signs", ["signs"], (p) => [cell("kind", [...p, "kind"], ["stop", "yield", "speed_limit"]),
+    placeField("at", [...p, "at"], {}), ...extras(get(S.doc, p), ["kind", "at"], p, true)],
+  () => ({ kind: "stop", at: defaultPlace() === "actor_self" ? { x: 0.0, y: 0.0 } : defaultPlace() }), { floats: true, addLabel: "+ sign" }));
+  form.append(signs);
   renderLights();
 }
 
