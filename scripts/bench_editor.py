@@ -4,7 +4,9 @@ TestClient; the page makes the same calls):
 * first frame: open a suite file (`/api/file`), its map (`/api/map`) and the front camera at
   t = 0 (`/api/frame`), for every suite scenario, from a cold server (no background rendering);
 * preview at time t: scene + front + BEV at a time not seen before (`/api/scene`, `/api/frame`
-  twice), on a fresh buffer, and again once seen (warm).
+  twice), on a fresh buffer, and again once seen (warm);
+* preview after an edit: the same at the last time on a buffer just changed (the file's text
+  plus a comment line: a new world must be started and driven to t).
 
     python scripts/bench_editor.py [--times 5,15,30] [--limit N]
 """
@@ -43,6 +45,7 @@ def main() -> int:
     first: dict[str, float] = {}
     cold: dict[str, list[float]] = {}
     warm: list[float] = []
+    edited: dict[str, float] = {}
     app = create_app(ROOT, precompute=False)
     with TestClient(app, base_url=BASE) as c:
         for rel in files:
@@ -64,6 +67,12 @@ def main() -> int:
                 for view in ("front", "bev"):
                     c.post("/api/frame", json={**body, "view": view}, headers=ORIGIN)
                 warm.append(time.perf_counter() - t0)
+            body = {"path": rel, "text": d["text"] + "# edited\n", "time_s": times[-1]}
+            t0 = time.perf_counter()
+            c.post("/api/scene", json=body, headers=ORIGIN)
+            for view in ("front", "bev"):
+                c.post("/api/frame", json={**body, "view": view}, headers=ORIGIN)
+            edited[rel] = time.perf_counter() - t0
     print(f"{len(files)} scenarios; preview times {times} s")
     print(f"first frame (file + map + front at t=0)   {_ms(list(first.values()))}   target ≤ 2000 ms")
     slowest = max(first, key=lambda k: first[k])
@@ -71,6 +80,11 @@ def main() -> int:
     for net, xs in sorted(cold.items()):
         print(f"preview, new time, {net:<10} ({len(xs):3d})  {_ms(xs)}   target ≤ 300 ms")
     print(f"preview, time seen before       ({len(warm):3d})  {_ms(warm)}")
+    print(
+        f"preview after an edit, t = {times[-1]:g} s  ({len(edited):3d})  {_ms(list(edited.values()))}   target ≤ 300 ms"
+    )
+    slowest = max(edited, key=lambda k: edited[k])
+    print(f"  slowest: {slowest} ({1000 * edited[slowest]:.0f} ms)")
     return 0
 
 

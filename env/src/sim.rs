@@ -21,13 +21,13 @@ use crate::score::{
     Contact, LogLine, RunFooter, RunHeader, RunInfo, SceneScore, ScoreParams, ScoreTracker, TickInput,
     TrajectorySample,
 };
-use crate::view::{ActorView, LightColor, TrafficLightView};
+use crate::view::{ActorView, LightColor, SignView, TrafficLightView};
 use crate::world::{TrafficModel, World};
 use crate::{Error, Result, DECISION_INTERVAL_TICKS};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 use std::path::Path;
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock, Weak};
 use std::time::Instant;
 
 /// How actions are read.
@@ -312,7 +312,7 @@ impl Sim {
         config.validate()?;
         let render_map = OnceLock::new();
         if config.front.is_some() || config.bev.is_some() {
-            let _ = render_map.set(Arc::new(RenderMap::build(&scenario.map)));
+            let _ = render_map.set(shared_render_map(&scenario.map));
         }
         let tracker = RouteTracker::new(scenario.ego.route.clone());
         Ok(Sim {
@@ -611,8 +611,23 @@ impl Sim {
         crate::render::render_and_project(&map, &frame, cfg, out)
     }
 
+    /// What the renderers draw of the current state, kept to draw later: the scene at a time
+    /// already played renders without replaying the world (and its SUMO) from reset.
+    pub fn frame_snapshot(&self) -> Result<FrameSnapshot> {
+        let ep = self.episode.as_ref().ok_or_else(not_started)?;
+        let world = &ep.world;
+        Ok(FrameSnapshot {
+            map: self.render_map_or_build(),
+            ego: *world.ego(),
+            actors: world.actors().to_vec(),
+            lights: world.lights().to_vec(),
+            signs: world.signs().to_vec(),
+            route_points: self.route_points_world(&world.ego().pose),
+        })
+    }
+
     fn render_map_or_build(&self) -> Arc<RenderMap> {
-        self.render_map.get_or_init(|| Arc::new(RenderMap::build(&self.scenario.map))).clone()
+        self.render_map.get_or_init(|| shared_render_map(&self.scenario.map)).clone()
     }
 
     /// The vertices of the local route slice in the world frame (drawn on the BEV).
@@ -809,6 +824,54 @@ fn check_finite(field: &str, v: f64) -> Result<()> {
         Ok(())
     } else {
         Err(Error::config(field, v, "must be a finite number"))
+    }
+}
+
+/// The render map of a network, built once per process while the network lives: every Sim on a
+/// map shares it (a city's takes tens of milliseconds to build; an editor or a suite run makes
+/// a Sim per buffer or scenario on the same few networks).
+fn shared_render_map(net: &Arc<crate::map::Network>) -> Arc<RenderMap> {
+    type Entry = (Weak<crate::map::Network>, Arc<RenderMap>);
+    static MAPS: Mutex<Vec<Entry>> = Mutex::new(Vec::new());
+    let mut maps = MAPS.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    maps.retain(|(w, _)| w.strong_count() > 0);
+    if let Some((_, m)) = maps.iter().find(|(w, _)| w.upgrade().is_some_and(|n| Arc::ptr_eq(&n, net))) {
+        return m.clone();
+    }
+    let m = Arc::new(RenderMap::build(net));
+    maps.push((Arc::downgrade(net), m.clone()));
+    m
+}
+
+/// The renderers' input at one moment, owned ([`Sim::frame_snapshot`]): a frame rendered from it
+/// equals the one [`Sim::render_camera`] / [`Sim::render_bev`] gave at that moment.
+#[derive(Debug, Clone)]
+pub struct FrameSnapshot {
+    map: Arc<RenderMap>,
+    ego: ActorView,
+    actors: Vec<ActorView>,
+    lights: Vec<TrafficLightView>,
+    signs: Vec<SignView>,
+    route_points: Vec<Vec2>,
+}
+
+impl FrameSnapshot {
+    fn input(&self) -> FrameInput<'_> {
+        FrameInput {
+            ego: &self.ego,
+            actors: &self.actors,
+            lights: &self.lights,
+            signs: &self.signs,
+            route_points: &self.route_points,
+        }
+    }
+
+    pub fn render_camera(&self, cfg: &CameraConfig, out: &mut Image) -> Result<()> {
+        crate::render::render_camera(&self.map, &self.input(), cfg, out)
+    }
+
+    pub fn render_bev(&self, cfg: &BevConfig, out: &mut Image) -> Result<()> {
+        crate::render::render_bev(&self.map, &self.input(), cfg, out)
     }
 }
 

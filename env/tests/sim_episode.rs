@@ -220,3 +220,40 @@ fn scenario_duration_sets_the_timeout_and_defaults_to_the_longest_actor() {
     assert_eq!(rec.meta.reference_duration_s, 5.0);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn a_frame_snapshot_renders_its_moment_after_the_world_moved_on() {
+    use dh_env::render::{BevConfig, CameraConfig, Image};
+    let cam = CameraConfig { width: 160, height: 90, ..Default::default() };
+    let bev = BevConfig { size_px: 128, px_per_m: 2.0 };
+    let mut s = sim("01_pedestrian/town01_01_midblock_crossing.toml", no_images());
+    s.reset(0).unwrap();
+    let mut kept = Vec::new();
+    for i in 0..40 {
+        if i % 10 == 0 {
+            let (mut front, mut top) = (Image::default(), Image::default());
+            s.render_camera(&cam, &mut front).unwrap();
+            s.render_bev(&bev, &mut top).unwrap();
+            kept.push((s.frame_snapshot().unwrap(), front, top));
+        }
+        s.step(Action::Decision(Decision { steer: 0.0, target_speed_mps: 6.0 })).unwrap();
+    }
+    let mut now = Image::default();
+    s.render_camera(&cam, &mut now).unwrap();
+    for (snap, front, top) in &kept {
+        let (mut f, mut b) = (Image::default(), Image::default());
+        snap.render_camera(&cam, &mut f).unwrap();
+        snap.render_bev(&bev, &mut b).unwrap();
+        assert_eq!(f.data, front.data);
+        assert_eq!(b.data, top.data);
+        assert_ne!(f.data, now.data, "the ego moved on: the snapshot is not the present");
+    }
+    assert!(Sim::new(
+        &scenario("01_pedestrian/town01_01_midblock_crossing.toml"),
+        no_images(),
+        &LoadOptions::default()
+    )
+    .unwrap()
+    .frame_snapshot()
+    .is_err());
+}

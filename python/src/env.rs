@@ -8,7 +8,7 @@ use dh_agents::expert::{Expert, ExpertParams};
 use dh_env::drive::{ActuationBridge, Control, Decision, DecisionFailure};
 use dh_env::render::{BevConfig, CameraConfig, GifWriter, Image};
 use dh_env::scenario::{LoadOptions, MapCache};
-use dh_env::sim::{Action, ActionMode, Observation, Sim, SimConfig, StepInfo};
+use dh_env::sim::{Action, ActionMode, FrameSnapshot, Observation, Sim, SimConfig, StepInfo};
 use numpy::ndarray::Array3;
 use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1};
 use pyo3::prelude::*;
@@ -213,6 +213,13 @@ impl PySim {
         let inner = &self.inner;
         py.detach(|| inner.render_bev(&bev, &mut img)).map_err(|e| err(py, e))?;
         image_to_py(py, img)
+    }
+
+    /// What the renderers draw of the current state, to render later (`Frame`).
+    fn frame_snapshot(&self, py: Python<'_>) -> PyResult<PyFrame> {
+        let inner = &self.inner;
+        let snap = py.detach(|| inner.frame_snapshot()).map_err(|e| err(py, e))?;
+        Ok(PyFrame { inner: snap })
     }
 
     /// The six surround cameras (nuScenes-like rig): `{CAM_FRONT: array, ...}`.
@@ -429,6 +436,34 @@ fn parse_json<T: serde::de::DeserializeOwned>(py: Python<'_>, field: &str, text:
 }
 
 /// Animated GIF of RGB frames (H×W×3 uint8), e.g. an episode's front camera.
+/// One moment of an episode as the renderers see it (`Sim.frame_snapshot`): renders equal to
+/// the `Sim`'s at that moment, whatever the world did since.
+#[pyclass(name = "Frame", module = "drivehierarchy._core", frozen)]
+pub struct PyFrame {
+    inner: FrameSnapshot,
+}
+
+#[pymethods]
+impl PyFrame {
+    fn render_camera<'py>(&self, py: Python<'py>, config_json: &str) -> PyResult<Bound<'py, PyAny>> {
+        let cam: CameraConfig = parse_json(py, "camera", config_json)?;
+        cam.validate().map_err(|e| err(py, e))?;
+        let mut img = Image::default();
+        let inner = &self.inner;
+        py.detach(|| inner.render_camera(&cam, &mut img)).map_err(|e| err(py, e))?;
+        image_to_py(py, img)
+    }
+
+    fn render_bev<'py>(&self, py: Python<'py>, config_json: &str) -> PyResult<Bound<'py, PyAny>> {
+        let bev: BevConfig = parse_json(py, "bev", config_json)?;
+        bev.validate().map_err(|e| err(py, e))?;
+        let mut img = Image::default();
+        let inner = &self.inner;
+        py.detach(|| inner.render_bev(&bev, &mut img)).map_err(|e| err(py, e))?;
+        image_to_py(py, img)
+    }
+}
+
 #[pyclass(name = "GifWriter", module = "drivehierarchy._core")]
 pub struct PyGifWriter {
     inner: Option<GifWriter>,
@@ -585,6 +620,7 @@ pub fn map_summary(py: Python<'_>, map: &str, sumo_home: Option<PathBuf>) -> PyR
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PySim>()?;
+    m.add_class::<PyFrame>()?;
     m.add_class::<PyGifWriter>()?;
     m.add_class::<PySumoSession>()?;
     m.add("NATIVE_SUMO_SHIM", dh_env::world::sumo::shim::SHIM_FILE)?;

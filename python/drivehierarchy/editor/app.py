@@ -360,6 +360,7 @@ def create_app(
         d = _json(body)
         path, text = str(ed.abs_path(_field(d, "path", str))), _field(d, "text", str)
         out = []
+        ed.players.release_worlds()
         for cell in PROBE_CELLS:
             # One-off players: probing does not push the previewed buffer out of the cache.
             player = ScenePlayer(path, text, seed=int(d.get("seed", 0)), driver=cell)

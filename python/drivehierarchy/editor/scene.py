@@ -1,9 +1,12 @@
 """A scenario buffer played from reset by a reference driver: the scene at any time t.
 
 Everything shown comes from the world (`_core.Sim` through the R4 env): actor poses, lights,
-events, the score record and the frames. A player keeps its env live and the state of every
-decision so far, so the scene at an earlier time is a lookup and a frame at a later time only
-ticks the world forward; a frame at an earlier time replays from reset (the drivers are
+events, the score record and the frames. A player drives its world forward only, recording
+every decision's state and what the renderers draw of it (`Sim.frame_snapshot`), so the scene
+and the frames at any time already played are a lookup and a render, never a replay. A world
+whose episode ended is closed at once; a player can also be asked to give its world up
+(`release_world`: libsumo runs one SUMO per process, and the newest buffer should get it) and
+replays from reset only if asked for a time beyond what it recorded (the drivers are
 deterministic, so the replay is the same episode).
 """
 
@@ -57,38 +60,56 @@ class ScenePlayer:
     """One buffer (`path` + `text`, or the file itself when `text` is None) driven by `driver`."""
 
     def __init__(self, path: str, text: str | None, *, seed: int = 0, driver: str = "expert") -> None:
-        from drivehierarchy.envs.r4 import DriveHierarchyR4Env
         from drivehierarchy.suite_probe import _agent
 
         if driver not in DRIVERS:
             raise ValueError(f"driver {driver!r}: expected one of {', '.join(DRIVERS)}")
         self.lock = threading.RLock()
+        self.path = path
+        self.text = text
         self.seed = seed
         self.driver = driver
         self._agent = _agent(driver)
-        # State only: frames are rendered on demand at the editor's (the gallery's) quality.
-        self.env = DriveHierarchyR4Env(scenario=path, scenario_text=text, front=None, bev=None, prompt=False)
+        self.env: Any = None
         self.states: list[dict[str, Any]] = []
+        # What the renderers draw at each decision (`_core.Frame`), beside `states`.
+        self.snapshots: list[Any] = []
         # PNGs by (decision index, view), rendered on request or ahead of it (`precompute_step`).
         self.frames: dict[tuple[int, str], bytes] = {}
         self.focus = 0  # the decision last asked for: precomputing starts there
-        self._reset()
+        self.done = False
+        self.score: dict[str, Any] | None = None
+        self._open_world()
 
     @_locked
     def close(self) -> None:
-        self.env.close()
+        self.release_world()
 
-    def _reset(self) -> None:
+    def release_world(self) -> None:
+        """Closes the world (and its SUMO); what was recorded stays servable."""
+        if self.env is not None:
+            self.env.close()
+            self.env = None
+
+    def _open_world(self) -> None:
+        """A world at the last recorded decision: reset, then the recorded decisions replayed."""
+        from drivehierarchy.envs.r4 import DriveHierarchyR4Env
+
+        # State only: frames are rendered on demand at the editor's (the gallery's) quality.
+        self.env = DriveHierarchyR4Env(
+            scenario=self.path, scenario_text=self.text, front=None, bev=None, prompt=False
+        )
         self._obs, self._info = self.env.reset(seed=self.seed)
         self._agent.reset(self.env, self._info)
-        self.done = False
         self.live_index = 0
         if not self.states:
-            self.states.append(self._state(self._info))
+            self._record()
+        while self.live_index < len(self.states) - 1:
+            self._step()
 
-    @property
-    def time_s(self) -> float:
-        return float(self._info["time_s"])
+    def _record(self) -> None:
+        self.states.append(self._state(self._info))
+        self.snapshots.append(self.env.sim.frame_snapshot())
 
     def _state(self, info: dict[str, Any]) -> dict[str, Any]:
         sim = self.env.sim
@@ -127,9 +148,12 @@ class ScenePlayer:
         action = self._agent.act(self._obs, self._info)
         self._obs, _, terminated, truncated, self._info = self.env.step(action)
         self.live_index += 1
-        self.done = bool(terminated or truncated)
         if self.live_index == len(self.states):
-            self.states.append(self._state(self._info))
+            self._record()
+            if terminated or truncated:
+                self.done = True
+                self.score = self.env.sim.score()
+                self.release_world()
 
     def _index_at(self, t: float) -> int:
         """The last decision at or before t (the first when t precedes it)."""
@@ -139,16 +163,11 @@ class ScenePlayer:
 
     def _extend_to(self, t: float) -> None:
         """Drives on until the recorded states reach t (or the episode ends)."""
-        if self.live_index != len(self.states) - 1:
-            self._seek(len(self.states) - 1)
+        if self.done or self.states[-1]["time_s"] >= t - 1e-9:
+            return
+        if self.env is None:
+            self._open_world()
         while not self.done and self.states[-1]["time_s"] < t - 1e-9:
-            self._step()
-
-    def _seek(self, index: int) -> None:
-        """The live world at decision `index` (replaying from reset when it lies behind)."""
-        if index < self.live_index:
-            self._reset()
-        while self.live_index < index and not self.done:
             self._step()
 
     @_locked
@@ -163,13 +182,12 @@ class ScenePlayer:
         return self._render(self._index_at(t), view)
 
     def _render(self, index: int, view: str) -> np.ndarray:
-        if view not in ("front", "bev"):
-            raise ValueError(f"view {view!r}: expected 'front' or 'bev'")
-        self._seek(index)
-        sim = self.env.sim
+        snap = self.snapshots[index]
         if view == "front":
-            return sim.render_camera(json.dumps(dataclasses.asdict(FRONT)))
-        return sim.render_bev(json.dumps(dataclasses.asdict(BEV)))
+            return snap.render_camera(json.dumps(dataclasses.asdict(FRONT)))
+        if view == "bev":
+            return snap.render_bev(json.dumps(dataclasses.asdict(BEV)))
+        raise ValueError(f"view {view!r}: expected 'front' or 'bev'")
 
     @_locked
     def png_at(self, t: float, view: str) -> tuple[bytes, float]:
@@ -188,8 +206,7 @@ class ScenePlayer:
         states (so the scene at any t is a lookup), then one frame, the nearest unrendered
         decision at or after the focus first."""
         if not self.done:
-            target = self.states[-1]["time_s"] + 5.0
-            self._extend_to(target)
+            self._extend_to(self.states[-1]["time_s"] + 5.0)
             return True
         n = len(self.states)
         for index in [*range(self.focus, n), *range(0, self.focus)]:
@@ -203,8 +220,7 @@ class ScenePlayer:
     def run_to_end(self) -> dict[str, Any]:
         """Drives the episode to its end; the playback (every decision's state) and the score."""
         self._extend_to(float("inf"))
-        self._seek(len(self.states) - 1)
-        return {"driver": self.driver, "states": self.states, "score": self.env.sim.score()}
+        return {"driver": self.driver, "states": self.states, "score": self.score}
 
 
 class PlayerCache:
@@ -225,6 +241,7 @@ class PlayerCache:
         with self._lock:
             player = self._players.get(key)
             if player is None:
+                self._release_worlds(list(self._players.values()))
                 player = ScenePlayer(path, text, seed=seed, driver=driver)
                 self._players[key] = player
                 while len(self._players) > self.size:
@@ -233,6 +250,22 @@ class PlayerCache:
         for p in old:
             p.close()  # waits for a request or the precompute thread still using it
         return player
+
+    def release_worlds(self) -> None:
+        """Closes the live worlds of players no thread is using: a new buffer then gets the
+        process's in-process SUMO (starting another as a TraCI subprocess costs a second)."""
+        with self._lock:
+            players = list(self._players.values())
+        self._release_worlds(players)
+
+    @staticmethod
+    def _release_worlds(players: list[ScenePlayer]) -> None:
+        for p in players:
+            if p.lock.acquire(blocking=False):
+                try:
+                    p.release_world()
+                finally:
+                    p.lock.release()
 
     def close(self) -> None:
         with self._lock:
