@@ -252,8 +252,9 @@ fn scenario_json(s: &ResolvedScenario) -> Value {
 
 /// Validates scenario text as if it were the file at `path` (relative map paths and error
 /// messages refer to `path`, which need not exist) and returns its resolved geometry as JSON:
-/// the `validate` summary, the ego's start, destination and route, and every actor's path and
-/// trigger. Errors are raised as `scenario validate` prints them.
+/// the `validate` summary, the ego's start, destination and route, every actor's path and
+/// trigger, and every light's program with its phases over the episode's timeout. Errors are
+/// raised as `scenario validate` prints them.
 #[pyfunction]
 #[pyo3(signature = (path, text, sumo_home=None))]
 pub fn scenario_geometry(
