@@ -448,3 +448,28 @@ def test_suite_files_open_in_forms_with_no_json_fallback(page, server: str, work
         labels = page.eval_on_selector_all("label", "els => els.map((e) => e.textContent)")
         assert not [x for x in labels if "(JSON)" in x], (f, labels)
         assert page.locator("[data-path='ego.start.lane']").count() == 1, f
+
+
+def test_pace_and_lane_change_rows_are_added_edited_and_removed(page, server: str) -> None:
+    page.goto(server + "#" + FLOWS)
+    idle(page)
+    text = page.evaluate("window.editor.S.text")
+    van = "fieldset[data-actor='0']"
+    page.click(f"{van} button:has-text('+ gap pace')")
+    idle(page)
+    set_field(page, "actors.0.pace.gap_m", "3")
+    page.click(f"{van} button:has-text('+ lane change')")
+    idle(page)
+    set_field(page, "actors.0.lane_changes.0.at_s", "30")
+    # The van runs on T2C_2; the lane beside it is picked on the map.
+    page.click("[data-field='actors.0.lane_changes.0.to_lane'] button.pick")
+    click_lane(page, "T2C_1", 120.0)
+    assert page.is_hidden("#error-box"), page.inner_text("#error-box")
+    now = page.evaluate("window.editor.S.text")
+    assert "pace = { gap_s = 1.5, gap_m = 3.0, min_speed_mps = 1.0 }" in now
+    assert 'lane_changes = [{ at_s = 30.0, to_lane = "T2C_1", length_m = 20.0 }]' in now
+    page.click("[data-row='actors.0.lane_changes.0'] button.del")
+    idle(page)
+    page.click(f"{van} .pace button.del")
+    idle(page)
+    assert page.evaluate("window.editor.S.text") == text

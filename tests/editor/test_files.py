@@ -109,6 +109,17 @@ def test_row_edits_of_the_forms_keep_the_rest() -> None:
         apply_edits(TRAFFIC, [{"path": ["traffic", "vehicles"], "append": "E5"}])
 
 
+def test_a_new_key_goes_after_the_tables_last_key() -> None:
+    """Not after the blank line and comments that lead to the next table: adding and removing a
+    key gives back the file."""
+    text = TEXT + '\n[[actors]]\nname = "q"\n'
+    out = apply_edits(text, [{"path": ["ego", "speed_mps"], "value": 5.0}])
+    assert out == text.replace("# keep me\n", "# keep me\nspeed_mps = 5.0\n")
+    out = apply_edits(text, [{"path": ["actors", 0, "pace"], "value": {"gap_s": 1.5}}])
+    assert out == text.replace("s = 140.0 } }\n", "s = 140.0 } }\npace = { gap_s = 1.5 }\n")
+    assert apply_edits(out, [{"path": ["actors", 0, "pace"], "delete": True}]) == text
+
+
 def test_a_whole_number_over_a_float_stays_a_float() -> None:
     # The page's numbers are JSON: 45 may stand for 45.0, which the file keeps.
     assert apply_edits(TEXT, [{"path": ["ego", "start", "s"], "value": 45}]) == TEXT.replace("30.0", "45.0")

@@ -102,6 +102,25 @@ def _table(value: dict[str, Any]) -> Table:
     return t
 
 
+def _insert_key(parent: Any, key: Any, item: Any) -> bool:
+    """Adds a new plain key to a `[table]` right after its last key, so the blank lines and
+    comments that end the table (the ones before the next `[[actors]]`) stay where they are.
+    False when this is not such a case (the caller sets the key as usual)."""
+    if not isinstance(parent, Table) or not isinstance(key, str) or key in parent:
+        return False
+    if isinstance(item, (Table, AoT)):
+        return False
+    body = parent.value.body
+    keys = [i for i, (k, _) in enumerate(body) if k is not None]
+    if not keys or keys[-1] == len(body) - 1:
+        return False
+    parent.value._insert_at(keys[-1] + 1, key, item)
+    new = body[keys[-1] + 1][1]
+    if "\n" not in new.trivia.trail:
+        new.trivia.trail += "\n"  # its own line: the whitespace after it stays a blank line
+    return True
+
+
 def _keep_float(current: Any, value: Any) -> Any:
     """A whole number typed over a float stays a float (`30.0`, not `30`): JSON (the page's
     numbers) does not tell 30 from 30.0, the file does."""
@@ -204,7 +223,9 @@ def apply_edits(text: str, edits: list[dict[str, Any]]) -> str:
                 # A `[table]` stays a table (with `[[sub]]` arrays), not an inline one.
                 # `"table": true` makes a new `[parent.key]` table (`[traffic.random]`).
                 as_table = isinstance(value, dict) and (isinstance(current, Table) or bool(e.get("table")))
-                parent[last] = _table(value) if as_table else _item(value)
+                item = _table(value) if as_table else _item(value)
+                if not _insert_key(parent, last, item):
+                    parent[last] = item
             except (IndexError, TypeError) as exc:
                 raise ValueError(f"edit of `{where}`: {exc}") from exc
         else:

@@ -670,7 +670,11 @@ function rows(title, path, cells, fresh, opts) {
     const p = [...path, i];
     const row = h("div", { class: "rowcard", "data-row": p.join(".") },
       h("span", { class: "idx" }, `${i}`), ...cells(p, item, i),
-      h("button", { type: "button", class: "del", title: `remove ${path.join(".")}[${i}]`, onclick: () => safeEdit([{ path: p, delete: true }]) }, "×"));
+      // The last row of an inline array takes the key with it (`lane_changes = []` says nothing).
+      h("button", {
+        type: "button", class: "del", title: `remove ${path.join(".")}[${i}]`,
+        onclick: () => safeEdit([{ path: opts.inline && items.length === 1 ? path : p, delete: true }]),
+      }, "×"));
     box.append(row);
   });
   if (items !== undefined && !Array.isArray(items)) box.append(field(`${path[path.length - 1]} (JSON)`, path, "json"));
