@@ -80,9 +80,8 @@ def main() -> int:
     for net, xs in sorted(cold.items()):
         print(f"preview, new time, {net:<10} ({len(xs):3d})  {_ms(xs)}   target ≤ 300 ms")
     print(f"preview, time seen before       ({len(warm):3d})  {_ms(warm)}")
-    print(
-        f"preview after an edit, t = {times[-1]:g} s  ({len(edited):3d})  {_ms(list(edited.values()))}   target ≤ 300 ms"
-    )
+    label = f"preview after an edit, t = {times[-1]:g} s"
+    print(f"{label:<32}({len(edited):3d})  {_ms(list(edited.values()))}   target ≤ 300 ms")
     slowest = max(edited, key=lambda k: edited[k])
     print(f"  slowest: {slowest} ({1000 * edited[slowest]:.0f} ms)")
     return 0
