@@ -1,22 +1,50 @@
 #!/usr/bin/env bash
 # The whole test suite: formatting and lints (Rust + Python), the stub contract, the docs site,
 # Rust tests and the Python tests (Gymnasium/SB3 checkers, SUMO nets, loopback VLM server
-# included), the wheel smoke test from a fresh venv, and a bounded run of every fuzz target. Installs every extra into .venv first.
+# included), the wheel smoke test from a fresh venv, and a bounded run of every fuzz target.
+# Installs every extra into .venv first.
+#
+# Two lanes run side by side: the Rust lane (fmt, clippy, cargo test, fuzzing; it needs no
+# Python) starts at once in the background, while the Python lane installs (mostly downloads),
+# checks and runs pytest (mostly one core). Each step prints when it starts; the Rust lane's
+# output is printed when it ends, and the script fails if either lane failed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 start=$SECONDS
 step() { echo "== $1 (at $((SECONDS - start)) s)"; }
+
+rust_log="$(mktemp)"
+rust_lane() {
+    set -euo pipefail
+    step "rust: cargo fmt";    cargo fmt --all -- --check
+    step "rust: cargo clippy"; cargo clippy --workspace --all-targets --locked -- -D warnings
+    step "rust: cargo test";   cargo test --workspace --exclude dh-py --locked
+    step "rust: fuzz";         bash scripts/fuzz.sh 8
+    step "rust: done"
+}
+rust_lane >"$rust_log" 2>&1 &
+rust_pid=$!
+# A failing Python lane (set -e) must not leave the Rust lane running.
+trap 'pkill -P "$rust_pid" 2>/dev/null; kill "$rust_pid" 2>/dev/null || true' EXIT
+
 bash scripts/install.sh all
 PY=.venv/bin/python
 export PATH="$PWD/.venv/bin:$PATH"
-step "cargo fmt";    cargo fmt --all -- --check
-step "cargo clippy"; cargo clippy --workspace --all-targets --locked -- -D warnings
-step "ruff";         $PY -m ruff check .
-                     $PY -m ruff format --check .
-step "stubtest";     $PY -m mypy.stubtest drivehierarchy._core --allowlist python/stubtest-allowlist.txt
-step "docs";         DISABLE_MKDOCS_2_WARNING=true NO_MKDOCS_2_WARNING=1 $PY -m mkdocs build --strict --quiet --site-dir "$(mktemp -d)"
-step "wheel";        bash scripts/wheel_check.sh
-step "fuzz";         bash scripts/fuzz.sh 8
-step "cargo test";   cargo test --workspace --exclude dh-py --locked
-step "pytest";       $PY -m pytest tests --durations=15 "$@"
+step "ruff";     $PY -m ruff check .
+                 $PY -m ruff format --check .
+step "stubtest"; $PY -m mypy.stubtest drivehierarchy._core --allowlist python/stubtest-allowlist.txt
+step "docs";     DISABLE_MKDOCS_2_WARNING=true NO_MKDOCS_2_WARNING=1 $PY -m mkdocs build --strict --quiet --site-dir "$(mktemp -d)"
+step "wheel";    bash scripts/wheel_check.sh
+step "pytest";   $PY -m pytest tests --durations=15 "$@"
+step "pytest done; waiting for the Rust lane"
+rust_rc=0
+wait "$rust_pid" || rust_rc=$?
+trap - EXIT
+echo "---- Rust lane (fmt, clippy, cargo test, fuzz) ----"
+cat "$rust_log"
+rm -f "$rust_log"
+if [ "$rust_rc" != 0 ]; then
+    echo "test.sh: the Rust lane failed (exit $rust_rc; its output is above)" >&2
+    exit "$rust_rc"
+fi
 step "done"
