@@ -373,6 +373,14 @@ fn route_point(route: &Polyline, s: f64) -> Vec2 {
     }
 }
 
+/// Margin by which a committed ego (too close to stop short of a crossing actor's path) must
+/// clear that path before the actor arrives to go on instead of braking, s.
+const COMMITTED_MARGIN_S: f64 = 0.3;
+
+/// Steer swings below this (from the current steer to one needed ahead) do not bound the
+/// speed: pure pursuit's corner cutting absorbs them.
+const STATE_BOUND_MIN_SWING: f64 = 0.15;
+
 /// Straight extensions added before the start and after the end of the route, m.
 const ROUTE_EXTENSION_BEFORE_M: f64 = 20.0;
 const ROUTE_EXTENSION_AFTER_M: f64 = 80.0;
@@ -675,12 +683,12 @@ impl Expert {
         best.1
     }
 
-    /// Path curvature magnitude at arc `s` (heading change over ±w).
+    /// Signed path curvature at arc `s` (heading change over ±w; > 0 = left).
     fn curvature(&self, route: &Polyline, s: f64) -> f64 {
         const W: f64 = 2.5;
         let h0 = (self.path_point(route, s) - self.path_point(route, s - W)).angle();
         let h1 = (self.path_point(route, s + W) - self.path_point(route, s)).angle();
-        wrap_angle(h1 - h0).abs() / W
+        wrap_angle(h1 - h0) / W
     }
 
     /// Highest speed at which the steer needed around arc `s` is reachable in time and the
@@ -693,26 +701,41 @@ impl Expert {
         let ds = 1.0;
         let n = (horizon / ds) as usize;
         let kappa_max = p.max_wheel_angle_rad.tan() / p.wheelbase_m;
-        let steer_of = |k: f64| ((p.wheelbase_m * k).atan() / p.max_wheel_angle_rad).min(1.0);
+        let steer_of = |k: f64| ((p.wheelbase_m * k).atan() / p.max_wheel_angle_rad).clamp(-1.0, 1.0);
         let mut best = f64::INFINITY;
-        let ks: Vec<f64> =
-            (0..=n).map(|i| self.curvature(route, s_front + i as f64 * ds).min(kappa_max)).collect();
+        // Signed, for the bound from the current steer below.
+        let ks: Vec<f64> = (0..=n)
+            .map(|i| self.curvature(route, s_front + i as f64 * ds).clamp(-kappa_max, kappa_max))
+            .collect();
         let rate = p.steer_rate_usage * p.steer_rate_per_decision / p.decision_period_s;
+        let rate_full = p.steer_rate_per_decision / p.decision_period_s;
+        // The current steer in the curvature's sign convention (> 0 = left).
+        let u_now = -self.last_steer;
+        let half_len = p.wheelbase_m * 0.5 + 1.0;
         let mut envelope = Vec::with_capacity(ks.len());
         const SPAN: usize = 4;
         for (i, &k) in ks.iter().enumerate() {
             let d = i as f64 * ds;
-            let mut v_here = (p.max_lat_accel_mps2 / k.max(1e-6)).sqrt();
+            let mut v_here = (p.max_lat_accel_mps2 / k.abs().max(1e-6)).sqrt();
             // Steer-rate bound: the steer change over the last SPAN metres must be doable in the
             // time it takes to drive them.
             if i >= SPAN {
-                let du = (steer_of(k) - steer_of(ks[i - SPAN])).abs();
+                // On magnitudes: signed, a polyline's vertex kinks read as reverse bends.
+                let du = (steer_of(k).abs() - steer_of(ks[i - SPAN]).abs()).abs();
                 if du > 1e-3 {
                     v_here = v_here.min(rate * SPAN as f64 * ds / du);
                 }
             }
             let room = (d - v * p.decision_period_s).max(0.0);
             best = best.min((v_here * v_here + 2.0 * p.comfort_decel_mps2 * room).sqrt());
+            // From the wheel as it is now: the swing to the steer needed d metres on must fit in
+            // the time it takes to get there (centre to front plus d). Lagging into a tight bend
+            // or out of one into a reverse bend (a roundabout exit) otherwise carries the car
+            // out of its lane before the rate-limited wheel catches up.
+            let du = (steer_of(k) - u_now).abs();
+            if du > STATE_BOUND_MIN_SWING {
+                best = best.min(rate_full * (d + half_len) / du);
+            }
             envelope.push(v_here);
         }
         for i in (0..envelope.len().saturating_sub(1)).rev() {
@@ -886,18 +909,20 @@ impl Expert {
             let fwd = Vec2::from_angle(a.pose.yaw);
             let behind = is_vehicle && moving && self.coming_up_behind(route, a, s_lo, s_hi, s_front);
             let last = if moving { steps } else { 0 };
+            let travel_cap = if is_vehicle && moving { self.red_stop_travel(input, a) } else { None };
             for k in 0..=last {
                 let t = k as f64 * p.prediction_step_s;
+                let travel = travel_cap.map_or(a.speed_mps * t, |c| (a.speed_mps * t).min(c));
                 let mut fp = a.footprint();
                 // A vehicle coming up from behind or beside us along a lane is predicted along
                 // it: a straight line would make one in the next lane cut across every bend of
                 // our route and stop us for good in a stream of traffic. Others go straight.
                 match input.follow_lane.filter(|_| k > 0 && behind) {
-                    Some(follow) => match follow(a.pose.pos, a.pose.yaw, a.speed_mps * t) {
+                    Some(follow) => match follow(a.pose.pos, a.pose.yaw, travel) {
                         Some(pose) => fp.pose = pose,
-                        None => fp.pose.pos += fwd * (a.speed_mps * t),
+                        None => fp.pose.pos += fwd * travel,
                     },
-                    None => fp.pose.pos += fwd * (a.speed_mps * t),
+                    None => fp.pose.pos += fwd * travel,
                 }
                 let Some(s_hit) = self.corridor_hit(route, &fp.corners(), s_lo, s_hi, half_ego) else {
                     continue;
@@ -935,14 +960,36 @@ impl Expert {
                     // the spot would leave the ego standing in its way: keep going.
                     if v > 2.0 {
                         let extent = a.length_m.max(a.width_m) + 2.0 * p.corridor_margin_m;
-                        let t_clear = (d + extent + ego.length_m) / v;
+                        let t_clear = self.time_to_drive(d + extent + ego.length_m, v);
                         if t >= t_clear + p.pass_margin_s {
+                            break;
+                        }
+                        // Committed: the ego can no longer stop short of the actor's path (braking
+                        // would leave it standing there) and still clears it before the actor
+                        // arrives: go on.
+                        let room = s_hit - p.stop_gap_m - s_front - v * p.decision_period_s;
+                        if room < v * v / (2.0 * p.comfort_decel_mps2) && t >= t_clear + COMMITTED_MARGIN_S {
                             break;
                         }
                     }
                 }
                 let along = wrap_angle(a.pose.yaw - route_heading(route, s_hit.max(s_front)));
                 let v_along = a.speed_mps * along.cos();
+                if is_vehicle && along.abs() < 0.8 && v_along > 0.5 && behind {
+                    // Not a lead but a vehicle behind us (e.g. in the lane we merge into): once
+                    // we are ahead of it by a gap it does not close, braking would only bring it
+                    // onto us.
+                    if let Some(pr) = project_window(route, a.pose.pos, s_lo - 60.0, s_hi) {
+                        let gap_behind = s_rear - (pr.s + a.length_m * 0.5);
+                        // Closing speed against the slowest the ego will drive over the next
+                        // ~3 s (it may still have a bend to slow for).
+                        let n = (3.0 * v).ceil() as usize + 1;
+                        let v_min = self.envelope.iter().take(n).fold(v, |m, &e| m.min(e));
+                        if gap_behind > 1.0 + 2.0 * (v_along - v_min).max(0.0) {
+                            break;
+                        }
+                    }
+                }
                 if is_vehicle && along.abs() < 0.8 && v_along > 0.5 {
                     // Lead vehicle: gap from its current rear to our front.
                     let s_now = project_window(route, a.pose.pos, s_lo, s_hi).map_or(s_hit, |pr| pr.s);
@@ -1008,6 +1055,54 @@ impl Expert {
             }
         }
         out
+    }
+
+    /// Time for the front to cover `dist` metres at the current speed `v`, slowing where the
+    /// curve envelope of this decision asks for less (a turn across traffic is driven slower
+    /// than the approach, so the current speed alone would promise a clearance that the turn
+    /// does not keep).
+    fn time_to_drive(&self, dist: f64, v: f64) -> f64 {
+        let n = dist.max(0.0).ceil() as usize;
+        let mut t = 0.0;
+        for i in 0..n {
+            let step = (dist - i as f64).min(1.0);
+            let cap = self.envelope.get(i).copied().unwrap_or(f64::INFINITY);
+            t += step / v.min(cap).max(0.5);
+        }
+        t
+    }
+
+    /// How far a braking vehicle's centre travels before its front stops at the red / yellow
+    /// stop line it is heading for (its brake lights on and the stop comfortably possible):
+    /// it is not predicted through the junction on a straight line. `None` when no such line.
+    fn red_stop_travel(&self, input: &ExpertInput<'_>, a: &ActorView) -> Option<f64> {
+        if !a.braking {
+            return None;
+        }
+        let fwd = Vec2::from_angle(a.pose.yaw);
+        let mut cap: Option<f64> = None;
+        for light in input.lights {
+            if !matches!(light.color, LightColor::Red | LightColor::Yellow)
+                || !light.stop_line.pos.is_finite()
+            {
+                continue;
+            }
+            if wrap_angle(light.stop_line.yaw - a.pose.yaw).abs() > 0.5 {
+                continue;
+            }
+            let rel = light.stop_line.pos - a.pose.pos;
+            let ahead = rel.dot(fwd) - a.length_m * 0.5;
+            let lateral = rel.dot(fwd.perp()).abs();
+            if ahead < -0.5 || lateral > (0.6 * light.lane_width_m).max(1.0) {
+                continue;
+            }
+            if a.speed_mps * a.speed_mps / (2.0 * ahead.max(0.1)) > 4.5 {
+                continue;
+            }
+            let travel = (ahead + 0.5).max(0.0);
+            cap = Some(cap.map_or(travel, |c: f64| c.min(travel)));
+        }
+        cap
     }
 
     /// A vehicle driving our way whose centre is behind our front.
