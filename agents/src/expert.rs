@@ -88,6 +88,10 @@ pub struct ExpertParams {
     /// `prediction_step_s`.
     pub prediction_horizon_s: f64,
     pub prediction_step_s: f64,
+    /// Longer horizon for vehicles crossing the ego's heading (a junction's cross traffic):
+    /// whether to go ahead of one has to be decided before the conflict zone, while the
+    /// crossing takes the ego several seconds, s.
+    pub crossing_horizon_s: f64,
     /// A predicted (not current) corridor intrusion only matters if the ego could be there no
     /// later than this after it (earlier passages are clear).
     pub conflict_slack_s: f64,
@@ -144,6 +148,7 @@ impl Default for ExpertParams {
             time_headway_s: 1.5,
             prediction_horizon_s: 3.0,
             prediction_step_s: 0.5,
+            crossing_horizon_s: 6.0,
             conflict_slack_s: 1.5,
             pass_margin_s: 1.0,
             arrival_accel_mps2: 2.5,
@@ -196,6 +201,7 @@ impl ExpertParams {
             ("light_stop_margin_m", self.light_stop_margin_m),
             ("time_headway_s", self.time_headway_s),
             ("prediction_horizon_s", self.prediction_horizon_s),
+            ("crossing_horizon_s", self.crossing_horizon_s),
             ("conflict_slack_s", self.conflict_slack_s),
             ("pass_margin_s", self.pass_margin_s),
             ("stall_guard_s", self.stall_guard_s),
@@ -381,6 +387,12 @@ const COMMITTED_MARGIN_S: f64 = 0.3;
 /// speed: pure pursuit's corner cutting absorbs them.
 const STATE_BOUND_MIN_SWING: f64 = 0.15;
 
+/// A vehicle heading at least this far from the ego's heading (either way) is cross traffic, rad.
+const CROSSING_MIN_RAD: f64 = 0.6;
+
+/// The bound from the current steer never asks for less than this, m/s.
+const STATE_BOUND_FLOOR_MPS: f64 = 2.0;
+
 /// Straight extensions added before the start and after the end of the route, m.
 const ROUTE_EXTENSION_BEFORE_M: f64 = 20.0;
 const ROUTE_EXTENSION_AFTER_M: f64 = 80.0;
@@ -500,6 +512,9 @@ impl Expert {
         if self.detour.is_some_and(|d| s_ego - ego.length_m > d.s3) {
             self.detour = None;
         }
+        if self.detour.is_some_and(|d| self.pass_target_moved_off(input, &d, s_ego)) {
+            self.detour = None;
+        }
 
         let (target, reason) = self.target_speed(input, s_ego, v);
         let steer = self.steer(input, s_ego, v.max(target.min(v + 1.0)).max(1.0));
@@ -510,6 +525,27 @@ impl Expert {
             reason,
             path_offset_m: self.detour.map_or(0.0, |d| d.offset_at(s_ego)),
         }
+    }
+
+    /// Something standing in the lane that the detour passes has set off along it (a cyclist
+    /// at the kerb, a car that looked parked) while the ego is still short of it: the pass is
+    /// abandoned and the ego falls back into its lane behind it.
+    fn pass_target_moved_off(&self, input: &ExpertInput<'_>, d: &Detour, s_ego: f64) -> bool {
+        let route = input.route;
+        let s_front = s_ego + input.ego.length_m * 0.5;
+        if s_front >= d.s1 {
+            return false;
+        }
+        let half_ego = input.ego.width_m * 0.5 + self.params.corridor_margin_m;
+        input.actors.iter().any(|a| {
+            a.speed_mps > 0.5
+                && project_window(route, a.pose.pos, s_front, d.s2).is_some_and(|pr| {
+                    pr.s > s_front + 1e-6
+                        && pr.s < d.s2 - 1e-6
+                        && pr.lateral.abs() < half_ego + a.width_m * 0.5
+                        && wrap_angle(a.pose.yaw - route_heading(route, pr.s)).abs() < 0.8
+                })
+        })
     }
 
     /// Arc length of the ego on the route: a windowed projection around the last progress (so
@@ -732,9 +768,14 @@ impl Expert {
             // the time it takes to get there (centre to front plus d). Lagging into a tight bend
             // or out of one into a reverse bend (a roundabout exit) otherwise carries the car
             // out of its lane before the rate-limited wheel catches up.
-            let du = (steer_of(k) - u_now).abs();
+            // On curvature averaged over ±3 m (a polyline's vertex kinks are no bends), and never
+            // below a floor: crawling with the wheel at lock only turns the car on the spot.
+            let lo = i.saturating_sub(3);
+            let hi = (i + 3).min(ks.len() - 1);
+            let k_avg = ks[lo..=hi].iter().sum::<f64>() / (hi - lo + 1) as f64;
+            let du = (steer_of(k_avg) - u_now).abs();
             if du > STATE_BOUND_MIN_SWING {
-                best = best.min(rate_full * (d + half_len) / du);
+                best = best.min((rate_full * (d + half_len) / du).max(STATE_BOUND_FLOOR_MPS));
             }
             envelope.push(v_here);
         }
@@ -893,6 +934,8 @@ impl Expert {
         let s_lo = s_rear - 0.5;
         let s_hi = s_front + horizon;
         let half_ego = ego.width_m * 0.5 + p.corridor_margin_m;
+        let ego_lat =
+            project_window(route, ego.pose.pos, s_ego - 3.0, s_ego + 3.0).map_or(0.0, |pr| pr.lateral);
         let steps = (p.prediction_horizon_s / p.prediction_step_s).floor() as usize;
         let mut out = Vec::new();
         let mut blocking_static: Vec<(f64, &ActorView)> = Vec::new();
@@ -900,7 +943,10 @@ impl Expert {
             if !(a.pose.pos.is_finite() && a.pose.yaw.is_finite() && a.speed_mps.is_finite()) {
                 continue;
             }
-            let reach = horizon + a.speed_mps.abs() * p.prediction_horizon_s + a.length_m + 10.0;
+            let reach = horizon
+                + a.speed_mps.abs() * p.prediction_horizon_s.max(p.crossing_horizon_s)
+                + a.length_m
+                + 10.0;
             if a.pose.pos.dist(ego.pose.pos) > reach {
                 continue;
             }
@@ -908,7 +954,16 @@ impl Expert {
             let is_vehicle = !a.kind.is_static() && a.kind != ActorKind::Pedestrian;
             let fwd = Vec2::from_angle(a.pose.yaw);
             let behind = is_vehicle && moving && self.coming_up_behind(route, a, s_lo, s_hi, s_front);
-            let last = if moving { steps } else { 0 };
+            let crossing = is_vehicle && a.speed_mps > 3.0 && {
+                let rel = wrap_angle(a.pose.yaw - ego.pose.yaw).abs();
+                (CROSSING_MIN_RAD..=std::f64::consts::PI - CROSSING_MIN_RAD).contains(&rel)
+            };
+            let steps_here = if crossing {
+                steps.max((p.crossing_horizon_s / p.prediction_step_s).floor() as usize)
+            } else {
+                steps
+            };
+            let last = if moving { steps_here } else { 0 };
             let travel_cap = if is_vehicle && moving { self.red_stop_travel(input, a) } else { None };
             for k in 0..=last {
                 let t = k as f64 * p.prediction_step_s;
@@ -976,16 +1031,22 @@ impl Expert {
                 let along = wrap_angle(a.pose.yaw - route_heading(route, s_hit.max(s_front)));
                 let v_along = a.speed_mps * along.cos();
                 if is_vehicle && along.abs() < 0.8 && v_along > 0.5 && behind {
-                    // Not a lead but a vehicle behind us (e.g. in the lane we merge into): once
-                    // we are ahead of it by a gap it does not close, braking would only bring it
-                    // onto us.
+                    // Not a lead but a vehicle behind us: braking for it would only bring it onto
+                    // us. In our lane it has to keep its distance; in the lane we merge into, once
+                    // we are ahead of it by a gap it does not close at the speed we will drive
+                    // over the next ~3 s (a bend may still slow us), we go on; otherwise yield.
                     if let Some(pr) = project_window(route, a.pose.pos, s_lo - 60.0, s_hi) {
                         let gap_behind = s_rear - (pr.s + a.length_m * 0.5);
-                        // Closing speed against the slowest the ego will drive over the next
-                        // ~3 s (it may still have a bend to slow for).
+                        // Our lane: the pursued path's, or where the ego is now (partly in the
+                        // next lane during a detour or a merge, it is in that vehicle's way).
+                        let reach_lat = half_ego + a.width_m * 0.5;
+                        let in_our_lane = (pr.lateral - self.offset_at(pr.s)).abs() < reach_lat
+                            || (pr.lateral - ego_lat).abs() < reach_lat;
                         let n = (3.0 * v).ceil() as usize + 1;
                         let v_min = self.envelope.iter().take(n).fold(v, |m, &e| m.min(e));
-                        if gap_behind > 1.0 + 2.0 * (v_along - v_min).max(0.0) {
+                        if gap_behind > 0.0
+                            && (in_our_lane || gap_behind > 1.0 + 2.0 * (v_along - v_min).max(0.0))
+                        {
                             break;
                         }
                     }
@@ -1271,8 +1332,12 @@ impl Expert {
         let half_l = input.ego.length_m * 0.5;
         // Moving traffic in the lane the detour uses (from 50 m behind its start to 30 m past
         // its end): wait for a gap.
+        // How far back such traffic matters: what a vehicle at its speed covers while the ego,
+        // at its own (at least 2 m/s), drives the detour.
+        let v_ego = input.ego.speed_mps.max(2.0);
         for a in input.actors.iter().filter(|a| a.speed_mps.abs() > 0.2) {
-            if let Some(pr) = project_window(route, a.pose.pos, d.s0 - 50.0, d.s3 + 30.0) {
+            let back = 50f64.max(a.speed_mps.abs() * (d.s3 - d.s0) / v_ego);
+            if let Some(pr) = project_window(route, a.pose.pos, d.s0 - back, d.s3 + 30.0) {
                 // Traffic already ahead and driving on along the route leaves the gap; the lead
                 // law follows it if the ego catches up.
                 let along = a.speed_mps * wrap_angle(a.pose.yaw - route_heading(route, pr.s)).cos();
