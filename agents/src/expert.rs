@@ -13,20 +13,25 @@
 //!   then chosen among the steers reachable from the last one by simulating the ego's bicycle
 //!   model under each, followed by the base law, and keeping the best-tracking one.
 //! * Longitudinal: the minimum of cruise, the speed limit, a curve-speed profile (lateral
-//!   acceleration and steer-rate bounds, braked into at a comfortable deceleration; no
-//!   acceleration while the wheel is still turned), stops before actors in or predicted into the
-//!   route corridor (unless the ego clears the spot well before they arrive), stops before red /
-//!   yellow lights on the route, and a time-headway law behind a lead vehicle. Actors are
-//!   extrapolated on straight lines, except vehicles coming up from behind or beside the ego,
-//!   which follow their lane when a lane-following predictor is given (a straight line would
-//!   cut them across every bend of the route and hold the ego in a stream of traffic); one
-//!   still wholly behind the ego is not braked for when it could only reach the corridor beside
-//!   or behind the ego's front.
+//!   acceleration and steer-rate bounds, braked into at a comfortable deceleration; the swing
+//!   from the wheel as it is now to the steer needed ahead must fit in the time to get there;
+//!   no acceleration while the wheel is still turned), stops before actors in or predicted into
+//!   the route corridor (unless the ego clears the spot well before they arrive, timed with the
+//!   curve profile, or can no longer stop short of their path and still clears it), stops
+//!   before red / yellow lights on the route, and a time-headway law behind a lead vehicle.
+//!   Actors are extrapolated on straight lines over 3 s (cross traffic over 6 s, so that going
+//!   ahead of it is decided before the conflict zone); a braking vehicle heading for a red /
+//!   yellow stop line stops there; vehicles coming up from behind or beside the ego follow
+//!   their lane when a lane-following predictor is given (a straight line would cut them across
+//!   every bend of the route and hold the ego in a stream of traffic). A vehicle behind the ego
+//!   is never a lead: in the ego's lane it is not braked for, in a lane the ego merges into it
+//!   is yielded to unless the ego is ahead by a gap it does not close.
 //! * Stall guard: the protocol ends an episode after 5 s below 1 km/h, so when held at rest by a
 //!   light, a standing actor or a crawling lead the expert creeps a few centimetres every few
 //!   seconds.
 //! * Optional local planner: with a drivable-area oracle, a static obstacle blocking the route is
-//!   passed by offsetting the pursuit path laterally into free same-direction drivable space.
+//!   passed by offsetting the pursuit path laterally into free same-direction drivable space;
+//!   the pass is abandoned while the ego is short of the obstacle if it sets off along the lane.
 //!
 //! State: the expert assumes each [`Expert::act`] output reaches the bridge (one call per
 //! decision); [`Expert::reset`] at every episode start.
