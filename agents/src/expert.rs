@@ -13,20 +13,25 @@
 //!   then chosen among the steers reachable from the last one by simulating the ego's bicycle
 //!   model under each, followed by the base law, and keeping the best-tracking one.
 //! * Longitudinal: the minimum of cruise, the speed limit, a curve-speed profile (lateral
-//!   acceleration and steer-rate bounds, braked into at a comfortable deceleration; no
-//!   acceleration while the wheel is still turned), stops before actors in or predicted into the
-//!   route corridor (unless the ego clears the spot well before they arrive), stops before red /
-//!   yellow lights on the route, and a time-headway law behind a lead vehicle. Actors are
-//!   extrapolated on straight lines, except vehicles coming up from behind or beside the ego,
-//!   which follow their lane when a lane-following predictor is given (a straight line would
-//!   cut them across every bend of the route and hold the ego in a stream of traffic); one
-//!   still wholly behind the ego is not braked for when it could only reach the corridor beside
-//!   or behind the ego's front.
+//!   acceleration and steer-rate bounds, braked into at a comfortable deceleration; the swing
+//!   from the wheel as it is now to the steer needed ahead must fit in the time to get there;
+//!   no acceleration while the wheel is still turned), stops before actors in or predicted into
+//!   the route corridor (unless the ego clears the spot well before they arrive, timed with the
+//!   curve profile, or can no longer stop short of their path and still clears it), stops
+//!   before red / yellow lights on the route, and a time-headway law behind a lead vehicle.
+//!   Actors are extrapolated on straight lines over 3 s (cross traffic over 6 s, so that going
+//!   ahead of it is decided before the conflict zone); a braking vehicle heading for a red /
+//!   yellow stop line stops there; vehicles coming up from behind or beside the ego follow
+//!   their lane when a lane-following predictor is given (a straight line would cut them across
+//!   every bend of the route and hold the ego in a stream of traffic). A vehicle behind the ego
+//!   is never a lead: in the ego's lane it is not braked for, in a lane the ego merges into it
+//!   is yielded to unless the ego is ahead by a gap it does not close.
 //! * Stall guard: the protocol ends an episode after 5 s below 1 km/h, so when held at rest by a
 //!   light, a standing actor or a crawling lead the expert creeps a few centimetres every few
 //!   seconds.
 //! * Optional local planner: with a drivable-area oracle, a static obstacle blocking the route is
-//!   passed by offsetting the pursuit path laterally into free same-direction drivable space.
+//!   passed by offsetting the pursuit path laterally into free same-direction drivable space;
+//!   the pass is abandoned while the ego is short of the obstacle if it sets off along the lane.
 //!
 //! State: the expert assumes each [`Expert::act`] output reaches the bridge (one call per
 //! decision); [`Expert::reset`] at every episode start.
@@ -88,6 +93,10 @@ pub struct ExpertParams {
     /// `prediction_step_s`.
     pub prediction_horizon_s: f64,
     pub prediction_step_s: f64,
+    /// Longer horizon for vehicles crossing the ego's heading (a junction's cross traffic):
+    /// whether to go ahead of one has to be decided before the conflict zone, while the
+    /// crossing takes the ego several seconds, s.
+    pub crossing_horizon_s: f64,
     /// A predicted (not current) corridor intrusion only matters if the ego could be there no
     /// later than this after it (earlier passages are clear).
     pub conflict_slack_s: f64,
@@ -144,6 +153,7 @@ impl Default for ExpertParams {
             time_headway_s: 1.5,
             prediction_horizon_s: 3.0,
             prediction_step_s: 0.5,
+            crossing_horizon_s: 6.0,
             conflict_slack_s: 1.5,
             pass_margin_s: 1.0,
             arrival_accel_mps2: 2.5,
@@ -196,6 +206,7 @@ impl ExpertParams {
             ("light_stop_margin_m", self.light_stop_margin_m),
             ("time_headway_s", self.time_headway_s),
             ("prediction_horizon_s", self.prediction_horizon_s),
+            ("crossing_horizon_s", self.crossing_horizon_s),
             ("conflict_slack_s", self.conflict_slack_s),
             ("pass_margin_s", self.pass_margin_s),
             ("stall_guard_s", self.stall_guard_s),
@@ -373,6 +384,20 @@ fn route_point(route: &Polyline, s: f64) -> Vec2 {
     }
 }
 
+/// Margin by which a committed ego (too close to stop short of a crossing actor's path) must
+/// clear that path before the actor arrives to go on instead of braking, s.
+const COMMITTED_MARGIN_S: f64 = 0.3;
+
+/// Steer swings below this (from the current steer to one needed ahead) do not bound the
+/// speed: pure pursuit's corner cutting absorbs them.
+const STATE_BOUND_MIN_SWING: f64 = 0.15;
+
+/// A vehicle heading at least this far from the ego's heading (either way) is cross traffic, rad.
+const CROSSING_MIN_RAD: f64 = 0.6;
+
+/// The bound from the current steer never asks for less than this, m/s.
+const STATE_BOUND_FLOOR_MPS: f64 = 2.0;
+
 /// Straight extensions added before the start and after the end of the route, m.
 const ROUTE_EXTENSION_BEFORE_M: f64 = 20.0;
 const ROUTE_EXTENSION_AFTER_M: f64 = 80.0;
@@ -492,6 +517,9 @@ impl Expert {
         if self.detour.is_some_and(|d| s_ego - ego.length_m > d.s3) {
             self.detour = None;
         }
+        if self.detour.is_some_and(|d| self.pass_target_moved_off(input, &d, s_ego)) {
+            self.detour = None;
+        }
 
         let (target, reason) = self.target_speed(input, s_ego, v);
         let steer = self.steer(input, s_ego, v.max(target.min(v + 1.0)).max(1.0));
@@ -502,6 +530,27 @@ impl Expert {
             reason,
             path_offset_m: self.detour.map_or(0.0, |d| d.offset_at(s_ego)),
         }
+    }
+
+    /// Something standing in the lane that the detour passes has set off along it (a cyclist
+    /// at the kerb, a car that looked parked) while the ego is still short of it: the pass is
+    /// abandoned and the ego falls back into its lane behind it.
+    fn pass_target_moved_off(&self, input: &ExpertInput<'_>, d: &Detour, s_ego: f64) -> bool {
+        let route = input.route;
+        let s_front = s_ego + input.ego.length_m * 0.5;
+        if s_front >= d.s1 {
+            return false;
+        }
+        let half_ego = input.ego.width_m * 0.5 + self.params.corridor_margin_m;
+        input.actors.iter().any(|a| {
+            a.speed_mps > 0.5
+                && project_window(route, a.pose.pos, s_front, d.s2).is_some_and(|pr| {
+                    pr.s > s_front + 1e-6
+                        && pr.s < d.s2 - 1e-6
+                        && pr.lateral.abs() < half_ego + a.width_m * 0.5
+                        && wrap_angle(a.pose.yaw - route_heading(route, pr.s)).abs() < 0.8
+                })
+        })
     }
 
     /// Arc length of the ego on the route: a windowed projection around the last progress (so
@@ -675,12 +724,12 @@ impl Expert {
         best.1
     }
 
-    /// Path curvature magnitude at arc `s` (heading change over ±w).
+    /// Signed path curvature at arc `s` (heading change over ±w; > 0 = left).
     fn curvature(&self, route: &Polyline, s: f64) -> f64 {
         const W: f64 = 2.5;
         let h0 = (self.path_point(route, s) - self.path_point(route, s - W)).angle();
         let h1 = (self.path_point(route, s + W) - self.path_point(route, s)).angle();
-        wrap_angle(h1 - h0).abs() / W
+        wrap_angle(h1 - h0) / W
     }
 
     /// Highest speed at which the steer needed around arc `s` is reachable in time and the
@@ -693,26 +742,46 @@ impl Expert {
         let ds = 1.0;
         let n = (horizon / ds) as usize;
         let kappa_max = p.max_wheel_angle_rad.tan() / p.wheelbase_m;
-        let steer_of = |k: f64| ((p.wheelbase_m * k).atan() / p.max_wheel_angle_rad).min(1.0);
+        let steer_of = |k: f64| ((p.wheelbase_m * k).atan() / p.max_wheel_angle_rad).clamp(-1.0, 1.0);
         let mut best = f64::INFINITY;
-        let ks: Vec<f64> =
-            (0..=n).map(|i| self.curvature(route, s_front + i as f64 * ds).min(kappa_max)).collect();
+        // Signed, for the bound from the current steer below.
+        let ks: Vec<f64> = (0..=n)
+            .map(|i| self.curvature(route, s_front + i as f64 * ds).clamp(-kappa_max, kappa_max))
+            .collect();
         let rate = p.steer_rate_usage * p.steer_rate_per_decision / p.decision_period_s;
+        let rate_full = p.steer_rate_per_decision / p.decision_period_s;
+        // The current steer in the curvature's sign convention (> 0 = left).
+        let u_now = -self.last_steer;
+        let half_len = p.wheelbase_m * 0.5 + 1.0;
         let mut envelope = Vec::with_capacity(ks.len());
         const SPAN: usize = 4;
         for (i, &k) in ks.iter().enumerate() {
             let d = i as f64 * ds;
-            let mut v_here = (p.max_lat_accel_mps2 / k.max(1e-6)).sqrt();
+            let mut v_here = (p.max_lat_accel_mps2 / k.abs().max(1e-6)).sqrt();
             // Steer-rate bound: the steer change over the last SPAN metres must be doable in the
             // time it takes to drive them.
             if i >= SPAN {
-                let du = (steer_of(k) - steer_of(ks[i - SPAN])).abs();
+                // On magnitudes: signed, a polyline's vertex kinks read as reverse bends.
+                let du = (steer_of(k).abs() - steer_of(ks[i - SPAN]).abs()).abs();
                 if du > 1e-3 {
                     v_here = v_here.min(rate * SPAN as f64 * ds / du);
                 }
             }
             let room = (d - v * p.decision_period_s).max(0.0);
             best = best.min((v_here * v_here + 2.0 * p.comfort_decel_mps2 * room).sqrt());
+            // From the wheel as it is now: the swing to the steer needed d metres on must fit in
+            // the time it takes to get there (centre to front plus d). Lagging into a tight bend
+            // or out of one into a reverse bend (a roundabout exit) otherwise carries the car
+            // out of its lane before the rate-limited wheel catches up.
+            // On curvature averaged over ±3 m (a polyline's vertex kinks are no bends), and never
+            // below a floor: crawling with the wheel at lock only turns the car on the spot.
+            let lo = i.saturating_sub(3);
+            let hi = (i + 3).min(ks.len() - 1);
+            let k_avg = ks[lo..=hi].iter().sum::<f64>() / (hi - lo + 1) as f64;
+            let du = (steer_of(k_avg) - u_now).abs();
+            if du > STATE_BOUND_MIN_SWING {
+                best = best.min((rate_full * (d + half_len) / du).max(STATE_BOUND_FLOOR_MPS));
+            }
             envelope.push(v_here);
         }
         for i in (0..envelope.len().saturating_sub(1)).rev() {
@@ -870,6 +939,8 @@ impl Expert {
         let s_lo = s_rear - 0.5;
         let s_hi = s_front + horizon;
         let half_ego = ego.width_m * 0.5 + p.corridor_margin_m;
+        let ego_lat =
+            project_window(route, ego.pose.pos, s_ego - 3.0, s_ego + 3.0).map_or(0.0, |pr| pr.lateral);
         let steps = (p.prediction_horizon_s / p.prediction_step_s).floor() as usize;
         let mut out = Vec::new();
         let mut blocking_static: Vec<(f64, &ActorView)> = Vec::new();
@@ -877,7 +948,10 @@ impl Expert {
             if !(a.pose.pos.is_finite() && a.pose.yaw.is_finite() && a.speed_mps.is_finite()) {
                 continue;
             }
-            let reach = horizon + a.speed_mps.abs() * p.prediction_horizon_s + a.length_m + 10.0;
+            let reach = horizon
+                + a.speed_mps.abs() * p.prediction_horizon_s.max(p.crossing_horizon_s)
+                + a.length_m
+                + 10.0;
             if a.pose.pos.dist(ego.pose.pos) > reach {
                 continue;
             }
@@ -885,19 +959,30 @@ impl Expert {
             let is_vehicle = !a.kind.is_static() && a.kind != ActorKind::Pedestrian;
             let fwd = Vec2::from_angle(a.pose.yaw);
             let behind = is_vehicle && moving && self.coming_up_behind(route, a, s_lo, s_hi, s_front);
-            let last = if moving { steps } else { 0 };
+            let crossing = is_vehicle && a.speed_mps > 3.0 && {
+                let rel = wrap_angle(a.pose.yaw - ego.pose.yaw).abs();
+                (CROSSING_MIN_RAD..=std::f64::consts::PI - CROSSING_MIN_RAD).contains(&rel)
+            };
+            let steps_here = if crossing {
+                steps.max((p.crossing_horizon_s / p.prediction_step_s).floor() as usize)
+            } else {
+                steps
+            };
+            let last = if moving { steps_here } else { 0 };
+            let travel_cap = if is_vehicle && moving { self.red_stop_travel(input, a) } else { None };
             for k in 0..=last {
                 let t = k as f64 * p.prediction_step_s;
+                let travel = travel_cap.map_or(a.speed_mps * t, |c| (a.speed_mps * t).min(c));
                 let mut fp = a.footprint();
                 // A vehicle coming up from behind or beside us along a lane is predicted along
                 // it: a straight line would make one in the next lane cut across every bend of
                 // our route and stop us for good in a stream of traffic. Others go straight.
                 match input.follow_lane.filter(|_| k > 0 && behind) {
-                    Some(follow) => match follow(a.pose.pos, a.pose.yaw, a.speed_mps * t) {
+                    Some(follow) => match follow(a.pose.pos, a.pose.yaw, travel) {
                         Some(pose) => fp.pose = pose,
-                        None => fp.pose.pos += fwd * (a.speed_mps * t),
+                        None => fp.pose.pos += fwd * travel,
                     },
-                    None => fp.pose.pos += fwd * (a.speed_mps * t),
+                    None => fp.pose.pos += fwd * travel,
                 }
                 let Some(s_hit) = self.corridor_hit(route, &fp.corners(), s_lo, s_hi, half_ego) else {
                     continue;
@@ -935,14 +1020,42 @@ impl Expert {
                     // the spot would leave the ego standing in its way: keep going.
                     if v > 2.0 {
                         let extent = a.length_m.max(a.width_m) + 2.0 * p.corridor_margin_m;
-                        let t_clear = (d + extent + ego.length_m) / v;
+                        let t_clear = self.time_to_drive(d + extent + ego.length_m, v);
                         if t >= t_clear + p.pass_margin_s {
+                            break;
+                        }
+                        // Committed: the ego can no longer stop short of the actor's path (braking
+                        // would leave it standing there) and still clears it before the actor
+                        // arrives: go on.
+                        let room = s_hit - p.stop_gap_m - s_front - v * p.decision_period_s;
+                        if room < v * v / (2.0 * p.comfort_decel_mps2) && t >= t_clear + COMMITTED_MARGIN_S {
                             break;
                         }
                     }
                 }
                 let along = wrap_angle(a.pose.yaw - route_heading(route, s_hit.max(s_front)));
                 let v_along = a.speed_mps * along.cos();
+                if is_vehicle && along.abs() < 0.8 && v_along > 0.5 && behind {
+                    // Not a lead but a vehicle behind us: braking for it would only bring it onto
+                    // us. In our lane it has to keep its distance; in the lane we merge into, once
+                    // we are ahead of it by a gap it does not close at the speed we will drive
+                    // over the next ~3 s (a bend may still slow us), we go on; otherwise yield.
+                    if let Some(pr) = project_window(route, a.pose.pos, s_lo - 60.0, s_hi) {
+                        let gap_behind = s_rear - (pr.s + a.length_m * 0.5);
+                        // Our lane: the pursued path's, or where the ego is now (partly in the
+                        // next lane during a detour or a merge, it is in that vehicle's way).
+                        let reach_lat = half_ego + a.width_m * 0.5;
+                        let in_our_lane = (pr.lateral - self.offset_at(pr.s)).abs() < reach_lat
+                            || (pr.lateral - ego_lat).abs() < reach_lat;
+                        let n = (3.0 * v).ceil() as usize + 1;
+                        let v_min = self.envelope.iter().take(n).fold(v, |m, &e| m.min(e));
+                        if gap_behind > 0.0
+                            && (in_our_lane || gap_behind > 1.0 + 2.0 * (v_along - v_min).max(0.0))
+                        {
+                            break;
+                        }
+                    }
+                }
                 if is_vehicle && along.abs() < 0.8 && v_along > 0.5 {
                     // Lead vehicle: gap from its current rear to our front.
                     let s_now = project_window(route, a.pose.pos, s_lo, s_hi).map_or(s_hit, |pr| pr.s);
@@ -1008,6 +1121,54 @@ impl Expert {
             }
         }
         out
+    }
+
+    /// Time for the front to cover `dist` metres at the current speed `v`, slowing where the
+    /// curve envelope of this decision asks for less (a turn across traffic is driven slower
+    /// than the approach, so the current speed alone would promise a clearance that the turn
+    /// does not keep).
+    fn time_to_drive(&self, dist: f64, v: f64) -> f64 {
+        let n = dist.max(0.0).ceil() as usize;
+        let mut t = 0.0;
+        for i in 0..n {
+            let step = (dist - i as f64).min(1.0);
+            let cap = self.envelope.get(i).copied().unwrap_or(f64::INFINITY);
+            t += step / v.min(cap).max(0.5);
+        }
+        t
+    }
+
+    /// How far a braking vehicle's centre travels before its front stops at the red / yellow
+    /// stop line it is heading for (its brake lights on and the stop comfortably possible):
+    /// it is not predicted through the junction on a straight line. `None` when no such line.
+    fn red_stop_travel(&self, input: &ExpertInput<'_>, a: &ActorView) -> Option<f64> {
+        if !a.braking {
+            return None;
+        }
+        let fwd = Vec2::from_angle(a.pose.yaw);
+        let mut cap: Option<f64> = None;
+        for light in input.lights {
+            if !matches!(light.color, LightColor::Red | LightColor::Yellow)
+                || !light.stop_line.pos.is_finite()
+            {
+                continue;
+            }
+            if wrap_angle(light.stop_line.yaw - a.pose.yaw).abs() > 0.5 {
+                continue;
+            }
+            let rel = light.stop_line.pos - a.pose.pos;
+            let ahead = rel.dot(fwd) - a.length_m * 0.5;
+            let lateral = rel.dot(fwd.perp()).abs();
+            if ahead < -0.5 || lateral > (0.6 * light.lane_width_m).max(1.0) {
+                continue;
+            }
+            if a.speed_mps * a.speed_mps / (2.0 * ahead.max(0.1)) > 4.5 {
+                continue;
+            }
+            let travel = (ahead + 0.5).max(0.0);
+            cap = Some(cap.map_or(travel, |c: f64| c.min(travel)));
+        }
+        cap
     }
 
     /// A vehicle driving our way whose centre is behind our front.
@@ -1176,8 +1337,12 @@ impl Expert {
         let half_l = input.ego.length_m * 0.5;
         // Moving traffic in the lane the detour uses (from 50 m behind its start to 30 m past
         // its end): wait for a gap.
+        // How far back such traffic matters: what a vehicle at its speed covers while the ego,
+        // at its own (at least 2 m/s), drives the detour.
+        let v_ego = input.ego.speed_mps.max(2.0);
         for a in input.actors.iter().filter(|a| a.speed_mps.abs() > 0.2) {
-            if let Some(pr) = project_window(route, a.pose.pos, d.s0 - 50.0, d.s3 + 30.0) {
+            let back = 50f64.max(a.speed_mps.abs() * (d.s3 - d.s0) / v_ego);
+            if let Some(pr) = project_window(route, a.pose.pos, d.s0 - back, d.s3 + 30.0) {
                 // Traffic already ahead and driving on along the route leaves the gap; the lead
                 // law follows it if the ego catches up.
                 let along = a.speed_mps * wrap_angle(a.pose.yaw - route_heading(route, pr.s)).cos();

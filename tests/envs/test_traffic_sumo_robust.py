@@ -35,14 +35,16 @@ def backend(request: pytest.FixtureRequest) -> str:
     return str(request.param)
 
 
-def noisy_expert(backend: str, scenario: str = QUEUE, sigma: float = 0.1) -> dict[str, object]:
+def noisy_expert(
+    backend: str, scenario: str = QUEUE, sigma: float = 0.1, noise_seed: int = 0
+) -> dict[str, object]:
     """The expert with Gaussian steering noise (a new user's noisy driver) to the episode's end."""
     env = make_env(scenario, sumo_backend=backend)
     try:
         obs, info = env.reset(seed=0)
         agent = ExpertAgent()
         agent.reset(env, info)
-        rng = np.random.default_rng(0)
+        rng = np.random.default_rng(noise_seed)
         digest = hashlib.sha256()
         for decision in range(3000):
             action = agent.act(obs, info).astype(np.float64)
@@ -62,13 +64,16 @@ def noisy_expert(backend: str, scenario: str = QUEUE, sigma: float = 0.1) -> dic
 
 
 def test_noisy_expert_ends_with_a_protocol_termination_on_both_backends() -> None:
-    # This run used to raise at decision 111: after the noise took the ego > 5 m off its route
-    # (placed with keepRoute=2, which replaces SUMO's copy of its route), keepRoute=1 could not
-    # map it back onto that copy ("Could not map vehicle 'dh_ego', distance to road is 100.43").
-    runs = {b: noisy_expert(b) for b in ("native", "python", "traci")}
+    # The issue's run (noise seed 0) used to raise at decision 111: after the noise took the ego
+    # > 5 m off its route (placed with keepRoute=2, which replaces SUMO's copy of its route),
+    # keepRoute=1 could not map it back onto that copy ("Could not map vehicle 'dh_ego', distance
+    # to road is 100.43"). With the expert of issue 16 item 9 that run leaves the road earlier
+    # (offroad timeout at decision 60); noise seed 3 drives on, off its route, past that point.
+    for seed in (0, 3):
+        runs = {b: noisy_expert(b, noise_seed=seed) for b in ("native", "python", "traci")}
+        assert runs["native"]["reason"] in TERMINATIONS, runs
+        assert runs["native"] == runs["python"] == runs["traci"]
     assert runs["native"]["decisions"] > 111, runs
-    assert runs["native"]["reason"] in TERMINATIONS, runs
-    assert runs["native"] == runs["python"] == runs["traci"]
 
 
 def test_full_lock_off_the_network_steps_to_a_termination(backend: str) -> None:
