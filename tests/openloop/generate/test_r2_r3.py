@@ -29,11 +29,13 @@ from drivehierarchy.benchmark.openloop.synthetic import oracle_answer
 from drivehierarchy.scenarios import builtin_root, sumo_home
 
 TASKS = ("R2_1", "R2_2_A", "R2_2_B", "R2_3", "R3_1", "R3_2")
-# Queues that stop and go, a pedestrian crossing, cross traffic: states, counts and outcomes vary.
+# Queues that stop and go, a cut-in, cross traffic, a pedestrian crossing: states, counts and
+# outcomes vary (each driven by the next of DRIVERS).
 SCENARIOS = (
     "06_traffic_flow/town01_03_stop_and_go_queue.toml",
-    "01_pedestrian/town01_01_midblock_crossing.toml",
+    "06_traffic_flow/town01_02_cut_in_right_turner.toml",
     "04_intersection/town01_04_straight_cross_traffic.toml",
+    "01_pedestrian/town01_01_midblock_crossing.toml",
 )
 N = 16
 
