@@ -12,6 +12,7 @@ deterministic, so the replay is the same episode).
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import functools
 import io
@@ -35,12 +36,12 @@ PROBE_CELLS = ("expert", "late_expert", "follower@8", "lights@8")
 
 
 def png_bytes(frame: np.ndarray) -> bytes:
-    """A frame as PNG, as `scenario preview --time` writes it (PIL's default zlib level: a
-    fifth of `optimize`'s time, for a few % more bytes)."""
+    """A frame as PNG, as `scenario preview --time` writes it (zlib level 3: two thirds of the
+    default level's time, for about a fifth more bytes; the preview is served on loopback)."""
     from PIL import Image
 
     buf = io.BytesIO()
-    Image.fromarray(frame).save(buf, format="PNG")
+    Image.fromarray(frame).save(buf, format="PNG", compress_level=3)
     return buf.getvalue()
 
 
@@ -71,7 +72,10 @@ class ScenePlayer:
         self.driver = driver
         self._agent = _agent(driver)
         self.env: Any = None
-        self.states: list[dict[str, Any]] = []
+        # Each decision's scene as the world's raw rows (made into the page's JSON when asked:
+        # building dicts for every SUMO vehicle at every decision is a tenth of a replay's time).
+        self._raw: list[tuple[Any, ...]] = []
+        self.times: list[float] = []
         # What the renderers draw at each decision (`_core.Frame`), beside `states`.
         self.snapshots: list[Any] = []
         # PNGs by (decision index, view), rendered on request or ahead of it (`precompute_step`).
@@ -102,21 +106,36 @@ class ScenePlayer:
         self._obs, self._info = self.env.reset(seed=self.seed)
         self._agent.reset(self.env, self._info)
         self.live_index = 0
-        if not self.states:
+        if not self._raw:
             self._record()
-        while self.live_index < len(self.states) - 1:
+        while self.live_index < len(self._raw) - 1:
             self._step()
 
     def _record(self) -> None:
-        self.states.append(self._state(self._info))
-        self.snapshots.append(self.env.sim.frame_snapshot())
+        sim, info = self.env.sim, self._info
+        self._raw.append(
+            (
+                sim.ego_array(),
+                sim.actors_array(),
+                sim.light_states(),
+                [e.get("type") for e in info.get("events", [])],
+                info.get("score_composed"),
+                info.get("termination_reason"),
+            )
+        )
+        self.times.append(float(info["time_s"]))
+        self.snapshots.append(sim.frame_snapshot())
 
-    def _state(self, info: dict[str, Any]) -> dict[str, Any]:
-        sim = self.env.sim
-        ego = sim.ego_array()
-        actors = sim.actors_array()
+    @property
+    def states(self) -> list[dict[str, Any]]:
+        """Every recorded decision's scene (`state_at`'s JSON)."""
+        return [self._state(i) for i in range(len(self._raw))]
+
+    def _state(self, index: int) -> dict[str, Any]:
+        ego_row, actor_rows, lights, events, score, termination = self._raw[index]
+        ego, actors = ego_row.tolist(), actor_rows.tolist()
         return {
-            "time_s": float(info["time_s"]),
+            "time_s": self.times[index],
             "ego": {
                 "x": ego[0],
                 "y": ego[1],
@@ -136,19 +155,19 @@ class ScenePlayer:
                     "width_m": r[6],
                     "traffic": bool(r[7]),
                 }
-                for r in actors.tolist()
+                for r in actors
             ],
-            "lights": [{"tl_id": t, "lane": lane, "color": c} for t, lane, c in sim.light_states()],
-            "events": [e.get("type") for e in info.get("events", [])],
-            "score": info.get("score_composed"),
-            "termination": info.get("termination_reason"),
+            "lights": [{"tl_id": t, "lane": lane, "color": c} for t, lane, c in lights],
+            "events": events,
+            "score": score,
+            "termination": termination,
         }
 
     def _step(self) -> None:
         action = self._agent.act(self._obs, self._info)
         self._obs, _, terminated, truncated, self._info = self.env.step(action)
         self.live_index += 1
-        if self.live_index == len(self.states):
+        if self.live_index == len(self._raw):
             self._record()
             if terminated or truncated:
                 self.done = True
@@ -157,23 +176,22 @@ class ScenePlayer:
 
     def _index_at(self, t: float) -> int:
         """The last decision at or before t (the first when t precedes it)."""
-        times = [s["time_s"] for s in self.states]
-        i = int(np.searchsorted(times, t + 1e-9, side="right")) - 1
+        i = bisect.bisect_right(self.times, t + 1e-9) - 1
         return max(i, 0)
 
     def _extend_to(self, t: float) -> None:
         """Drives on until the recorded states reach t (or the episode ends)."""
-        if self.done or self.states[-1]["time_s"] >= t - 1e-9:
+        if self.done or self.times[-1] >= t - 1e-9:
             return
         if self.env is None:
             self._open_world()
-        while not self.done and self.states[-1]["time_s"] < t - 1e-9:
+        while not self.done and self.times[-1] < t - 1e-9:
             self._step()
 
     @_locked
     def state_at(self, t: float) -> dict[str, Any]:
         self._extend_to(t)
-        return self.states[self._index_at(t)]
+        return self._state(self._index_at(t))
 
     @_locked
     def frame_at(self, t: float, view: str) -> np.ndarray:
@@ -198,7 +216,7 @@ class ScenePlayer:
         key = (index, view)
         if key not in self.frames:
             self.frames[key] = png_bytes(self._render(index, view))
-        return self.frames[key], self.states[index]["time_s"]
+        return self.frames[key], self.times[index]
 
     @_locked
     def precompute_step(self) -> bool:
@@ -206,9 +224,9 @@ class ScenePlayer:
         states (so the scene at any t is a lookup), then one frame, the nearest unrendered
         decision at or after the focus first."""
         if not self.done:
-            self._extend_to(self.states[-1]["time_s"] + 5.0)
+            self._extend_to(self.times[-1] + 5.0)
             return True
-        n = len(self.states)
+        n = len(self._raw)
         for index in [*range(self.focus, n), *range(0, self.focus)]:
             for view in ("front", "bev"):
                 if (index, view) not in self.frames:
