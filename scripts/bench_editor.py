@@ -6,7 +6,9 @@ TestClient; the page makes the same calls):
 * preview at time t: scene + front + BEV at a time not seen before (`/api/scene`, `/api/frame`
   twice), on a fresh buffer, and again once seen (warm);
 * preview after an edit: the same at the last time on a buffer just changed (the file's text
-  plus a comment line: a new world must be started and driven to t).
+  plus a comment line: a new world must be started and driven to t), asked at once; and as the
+  page asks, 120 ms (its debounce) after the edit's validation, with the server's background
+  thread on (it starts the edited buffer's world as the validation returns).
 
     python scripts/bench_editor.py [--times 5,15,30] [--limit N]
 """
@@ -46,6 +48,7 @@ def main() -> int:
     cold: dict[str, list[float]] = {}
     warm: list[float] = []
     edited: dict[str, float] = {}
+    paged: dict[str, float] = {}
     app = create_app(ROOT, precompute=False)
     with TestClient(app, base_url=BASE) as c:
         for rel in files:
@@ -73,6 +76,17 @@ def main() -> int:
             for view in ("front", "bev"):
                 c.post("/api/frame", json={**body, "view": view}, headers=ORIGIN)
             edited[rel] = time.perf_counter() - t0
+    with TestClient(create_app(ROOT), base_url=BASE) as c:
+        for rel in files:
+            text = c.get("/api/file", params={"path": rel}).json()["text"] + "# edited\n"
+            assert c.post("/api/validate", json={"path": rel, "text": text}, headers=ORIGIN).json()["ok"]
+            time.sleep(0.12)  # the page's preview debounce after an edit
+            body = {"path": rel, "text": text, "time_s": times[-1]}
+            t0 = time.perf_counter()
+            c.post("/api/scene", json=body, headers=ORIGIN)
+            for view in ("front", "bev"):
+                c.post("/api/frame", json={**body, "view": view}, headers=ORIGIN)
+            paged[rel] = time.perf_counter() - t0
     print(f"{len(files)} scenarios; preview times {times} s")
     print(f"first frame (file + map + front at t=0)   {_ms(list(first.values()))}   target ≤ 2000 ms")
     slowest = max(first, key=lambda k: first[k])
@@ -84,6 +98,10 @@ def main() -> int:
     print(f"{label:<32}({len(edited):3d})  {_ms(list(edited.values()))}   target ≤ 300 ms")
     slowest = max(edited, key=lambda k: edited[k])
     print(f"  slowest: {slowest} ({1000 * edited[slowest]:.0f} ms)")
+    label = "  as the page asks (120 ms later)"
+    print(f"{label:<32}({len(paged):3d})  {_ms(list(paged.values()))}   target ≤ 300 ms")
+    slowest = max(paged, key=lambda k: paged[k])
+    print(f"  slowest: {slowest} ({1000 * paged[slowest]:.0f} ms)")
     return 0
 
 

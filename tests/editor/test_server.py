@@ -319,3 +319,43 @@ def test_sumo_maps_are_drawn_and_snapped(client) -> None:
     )
     hit = r.json()
     assert hit["lane"] is not None and hit["distance_m"] < 1.0
+
+
+def test_an_edited_buffer_starts_driving_before_its_preview_is_asked(client) -> None:
+    """A valid edit hands its buffer to the background thread (the page asks for the preview
+    120 ms later); an invalid one does not."""
+    import threading
+    import time
+
+    ed = client.app.state.editor
+    text = (ed.root / PED).read_text(encoding="utf-8")
+    bad = client.post(
+        "/api/validate",
+        json={"path": PED, "text": text.replace("speed_mps", "speed_mps = -1 #")},
+        headers=ORIGIN,
+    )
+    assert not bad.json()["ok"] and ed._wanted is None
+    r = client.post(
+        "/api/edit",
+        json={"path": PED, "text": text, "edits": [{"path": ["ego", "speed_mps"], "value": 7.5}]},
+        headers=ORIGIN,
+    )
+    new = r.json()["text"]
+    assert r.json()["ok"] and ed._wanted == (str(ed.abs_path(PED)), new)
+    stop = threading.Event()
+    worker = threading.Thread(target=ed.precompute, args=(stop,), daemon=True)
+    worker.start()
+    try:
+        deadline = time.monotonic() + 120  # a bound for a stuck thread, not a speed claim
+        while time.monotonic() < deadline:
+            player = ed.players.most_recent()
+            if player is not None and player.text == new and len(player.times) > 1:
+                break
+            time.sleep(0.05)
+        else:
+            raise AssertionError("the edited buffer was never driven")
+        assert ed._wanted is None
+    finally:
+        stop.set()
+        ed.wake.set()
+        worker.join(timeout=60)

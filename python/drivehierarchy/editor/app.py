@@ -110,6 +110,10 @@ class Editor:
         # Requests being served: the precompute thread yields the CPU to them.
         self.in_flight = 0
         self._count_lock = threading.Lock()
+        # A buffer just edited (path, text), for the precompute thread to start driving while the
+        # page waits out its preview debounce; `wake` ends the thread's idle wait at once.
+        self._wanted: tuple[str, str] | None = None
+        self.wake = threading.Event()
 
     @contextlib.contextmanager
     def serving(self) -> Iterator[None]:
@@ -121,19 +125,31 @@ class Editor:
             with self._count_lock:
                 self.in_flight -= 1
 
+    def want(self, path: str, text: str) -> None:
+        """Starts the world of a buffer just edited ahead of its preview request (the page asks
+        120 ms after an edit; a new world on a SUMO scene must be driven from reset to t)."""
+        with self._count_lock:
+            self._wanted = (path, text)
+        self.wake.set()
+
     def precompute(self, stop: threading.Event) -> None:
-        """Works ahead for the most recent player, one short unit at a time under its lock, so
-        requests on it get the lock in between."""
+        """Works ahead for the most recent player (a buffer just edited first), one short unit at
+        a time under its lock, so requests on it get the lock in between."""
         while not stop.is_set():
             if self.in_flight:
                 stop.wait(0.02)
                 continue
-            player = self.players.most_recent()
             try:
+                with self._count_lock:
+                    wanted, self._wanted = self._wanted, None
+                if wanted is not None:
+                    self.players.get(*wanted)  # becomes the most recent player
+                player = self.players.most_recent()
                 busy = player is not None and player.precompute_step()
             except Exception:  # a closed player, or a buffer the world cannot play (requests say why)
                 busy = False
-            stop.wait(0.005 if busy else 0.2)
+            self.wake.wait(0.005 if busy else 0.2)
+            self.wake.clear()
 
     # -- helpers ---------------------------------------------------------------------------
     def abs_path(self, rel: str) -> Path:
@@ -296,15 +312,22 @@ def create_app(
         lane, s, dist = hit
         return JSONResponse({"lane": lane, "s": round(s, 1), "distance_m": dist})
 
+    def _checked(rel: str, text: str) -> dict[str, Any]:
+        """The validator's answer; a valid buffer's world starts in the background."""
+        out = ed.geometry(rel, text)
+        if out["ok"]:
+            ed.want(str(ed.abs_path(rel)), text)
+        return out
+
     def validate(request: Request, body: bytes) -> Response:
         d = _json(body)
-        return JSONResponse(ed.geometry(_field(d, "path", str), _field(d, "text", str)))
+        return JSONResponse(_checked(_field(d, "path", str), _field(d, "text", str)))
 
     def edit(request: Request, body: bytes) -> Response:
         d = _json(body)
         rel, text = _field(d, "path", str), _field(d, "text", str)
         new = files.apply_edits(text, _field(d, "edits", list))
-        return JSONResponse({"text": new, **ed.geometry(rel, new)})
+        return JSONResponse({"text": new, **_checked(rel, new)})
 
     def save(request: Request, body: bytes) -> Response:
         d = _json(body)
@@ -409,6 +432,7 @@ def create_app(
             worker.start()
         yield
         stop.set()
+        ed.wake.set()
         if worker is not None:
             worker.join(timeout=30)
         ed.players.close()
