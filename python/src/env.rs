@@ -197,22 +197,14 @@ impl PySim {
 
     /// Renders any camera (full `CameraConfig` as JSON) at the current state.
     fn render_camera<'py>(&self, py: Python<'py>, config_json: &str) -> PyResult<Bound<'py, PyAny>> {
-        let cam: CameraConfig = parse_json(py, "camera", config_json)?;
-        cam.validate().map_err(|e| err(py, e))?;
-        let mut img = Image::default();
         let inner = &self.inner;
-        py.detach(|| inner.render_camera(&cam, &mut img)).map_err(|e| err(py, e))?;
-        image_to_py(py, img)
+        render_json(py, "camera", config_json, |cam: &CameraConfig, img| inner.render_camera(cam, img))
     }
 
     /// Renders a BEV (full `BevConfig` as JSON) at the current state.
     fn render_bev<'py>(&self, py: Python<'py>, config_json: &str) -> PyResult<Bound<'py, PyAny>> {
-        let bev: BevConfig = parse_json(py, "bev", config_json)?;
-        bev.validate().map_err(|e| err(py, e))?;
-        let mut img = Image::default();
         let inner = &self.inner;
-        py.detach(|| inner.render_bev(&bev, &mut img)).map_err(|e| err(py, e))?;
-        image_to_py(py, img)
+        render_json(py, "bev", config_json, |bev: &BevConfig, img| inner.render_bev(bev, img))
     }
 
     /// What the renderers draw of the current state, to render later (`Frame`).
@@ -446,21 +438,13 @@ pub struct PyFrame {
 #[pymethods]
 impl PyFrame {
     fn render_camera<'py>(&self, py: Python<'py>, config_json: &str) -> PyResult<Bound<'py, PyAny>> {
-        let cam: CameraConfig = parse_json(py, "camera", config_json)?;
-        cam.validate().map_err(|e| err(py, e))?;
-        let mut img = Image::default();
         let inner = &self.inner;
-        py.detach(|| inner.render_camera(&cam, &mut img)).map_err(|e| err(py, e))?;
-        image_to_py(py, img)
+        render_json(py, "camera", config_json, |cam: &CameraConfig, img| inner.render_camera(cam, img))
     }
 
     fn render_bev<'py>(&self, py: Python<'py>, config_json: &str) -> PyResult<Bound<'py, PyAny>> {
-        let bev: BevConfig = parse_json(py, "bev", config_json)?;
-        bev.validate().map_err(|e| err(py, e))?;
-        let mut img = Image::default();
         let inner = &self.inner;
-        py.detach(|| inner.render_bev(&bev, &mut img)).map_err(|e| err(py, e))?;
-        image_to_py(py, img)
+        render_json(py, "bev", config_json, |bev: &BevConfig, img| inner.render_bev(bev, img))
     }
 }
 
@@ -503,6 +487,42 @@ impl PyGifWriter {
     #[getter]
     fn frames(&self) -> usize {
         self.inner.as_ref().map_or(0, |w| w.frames())
+    }
+}
+
+/// Parses and validates a renderer config (`field` names it in errors), renders with the GIL
+/// released and returns the frame as a numpy array: `Sim`'s and `Frame`'s render methods.
+fn render_json<'py, C, F>(
+    py: Python<'py>,
+    field: &str,
+    config_json: &str,
+    render: F,
+) -> PyResult<Bound<'py, PyAny>>
+where
+    C: serde::de::DeserializeOwned + RenderConfig + Sync,
+    F: FnOnce(&C, &mut Image) -> dh_env::Result<()> + Send,
+{
+    let cfg: C = parse_json(py, field, config_json)?;
+    cfg.check().map_err(|e| err(py, e))?;
+    let mut img = Image::default();
+    py.detach(|| render(&cfg, &mut img)).map_err(|e| err(py, e))?;
+    image_to_py(py, img)
+}
+
+/// The validation both renderer configs have.
+trait RenderConfig {
+    fn check(&self) -> dh_env::Result<()>;
+}
+
+impl RenderConfig for CameraConfig {
+    fn check(&self) -> dh_env::Result<()> {
+        self.validate()
+    }
+}
+
+impl RenderConfig for BevConfig {
+    fn check(&self) -> dh_env::Result<()> {
+        self.validate()
     }
 }
 
