@@ -30,7 +30,8 @@ from drivehierarchy.scenarios import builtin_root, sumo_home
 
 TASKS = ("R2_1", "R2_2_A", "R2_2_B", "R2_3", "R3_1", "R3_2")
 # Queues that stop and go, a cut-in, cross traffic, a pedestrian crossing: states, counts and
-# outcomes vary (each driven by the next of DRIVERS).
+# outcomes vary (each driven by the next of DRIVERS, for 60 s: the queue needs that long to close up
+# and clear).
 SCENARIOS = (
     "06_traffic_flow/town01_03_stop_and_go_queue.toml",
     "06_traffic_flow/town01_02_cut_in_right_turner.toml",
@@ -48,7 +49,7 @@ def moments() -> list[Any]:
     needs = [reg[t][1] for t in TASKS]
     out = []
     for i, s in enumerate(SCENARIOS):
-        out += rollout(builtin_root() / "r4" / s, DRIVERS[i % len(DRIVERS)], 0, needs, max_s=40.0).moments()
+        out += rollout(builtin_root() / "r4" / s, DRIVERS[i % len(DRIVERS)], 0, needs, max_s=60.0).moments()
     return out
 
 
