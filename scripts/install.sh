@@ -66,7 +66,50 @@ case ",$extras," in
     fi
     ;;
 esac
-spec="."
-[ -n "$extras" ] && spec=".[$extras]"
-env -u SUMO_HOME "$VPY" -m pip install --quiet -e "$spec"
+# The dependencies (mostly downloads: torch alone is ~1 GB) install in the background while the
+# Rust core builds: pip resolves them from pyproject.toml's own lists, and the package itself is
+# installed with --no-deps, so the two never touch the same distribution.
+reqs="$(mktemp)"
+trap 'rm -f "$reqs"' EXIT
+"$VPY" - "$extras" >"$reqs" <<'PY'
+import sys
+import tomllib
+
+project = tomllib.load(open("pyproject.toml", "rb"))["project"]
+extras = project.get("optional-dependencies", {})
+out, seen = list(project["dependencies"]), set()
+
+
+def add(extra: str) -> None:
+    if extra in seen:
+        return
+    if extra not in extras:
+        sys.exit(f"install: pyproject.toml has no extra {extra!r} (extras: {', '.join(extras)})")
+    seen.add(extra)
+    for req in extras[extra]:
+        if req.startswith(project["name"] + "["):  # a self-reference, e.g. drivehierarchy[rl,dev]
+            for inner in req[req.index("[") + 1 : req.index("]")].split(","):
+                add(inner.strip())
+        else:
+            out.append(req)
+
+
+for extra in filter(None, (e.strip() for e in sys.argv[1].split(","))):
+    add(extra)
+print("\n".join(out))
+PY
+"$VPY" -m pip install --quiet -r "$reqs" &
+deps_pid=$!
+build_rc=0
+env -u SUMO_HOME "$VPY" -m pip install --quiet --no-deps -e . || build_rc=$?
+deps_rc=0
+wait "$deps_pid" || deps_rc=$?
+if [ "$deps_rc" != 0 ]; then
+    echo "install: installing the dependencies${extras:+ of [$extras]} failed (pip exit $deps_rc, its output is above)" >&2
+    exit "$deps_rc"
+fi
+if [ "$build_rc" != 0 ]; then
+    echo "install: building drivehierarchy failed (pip exit $build_rc, its output is above)" >&2
+    exit "$build_rc"
+fi
 echo "install: drivehierarchy${extras:+[$extras]} installed in .venv ($(du -sh .venv | cut -f1)); activate with: source .venv/bin/activate"

@@ -18,6 +18,7 @@ status is 1 otherwise. Linux (reads /proc).
 from __future__ import annotations
 
 import argparse
+import ctypes
 import gc
 import hashlib
 import json
@@ -106,11 +107,25 @@ def descendants() -> list[tuple[int, str]]:
 OWN_PIDS: set[int] = set()
 
 
+def malloc_trim() -> bool:
+    """glibc's malloc_trim(0): hands the heap's free pages back to the OS. True if it ran."""
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        return bool(libc.malloc_trim(0)) or True
+    except (OSError, AttributeError):
+        return False
+
+
 def resources() -> dict[str, Any]:
     gc.collect()
     kids = [(pid, name) for pid, name in descendants() if pid not in OWN_PIDS]
+    raw = rss_mb()
+    trimmed = rss_mb() if malloc_trim() else None
     return {
-        "rss_mb": round(rss_mb(), 1),
+        "rss_mb": round(raw, 1),
+        "rss_trimmed_mb": None if trimmed is None else round(trimmed, 1),
+        "py_blocks": sys.getallocatedblocks(),
+        "gc_objects": len(gc.get_objects()),
         "threads": len(os.listdir("/proc/self/task")),
         "python_threads": threading.active_count(),
         "fds": len(os.listdir("/proc/self/fd")),

@@ -16,10 +16,18 @@ step() { echo "== $1 (at $((SECONDS - start)) s)"; }
 rust_log="$(mktemp)"
 rust_lane() {
     set -euo pipefail
-    step "rust: cargo fmt";    cargo fmt --all -- --check
-    step "rust: cargo clippy"; cargo clippy --workspace --all-targets --locked -- -D warnings
-    step "rust: cargo test";   cargo test --workspace --exclude dh-py --locked
-    step "rust: fuzz";         bash scripts/fuzz.sh 8
+    step "rust: cargo fmt"; cargo fmt --all -- --check
+    # Clippy lints inside the test build, as `cargo clippy` itself does (clippy-driver as the
+    # workspace's rustc wrapper; -D warnings as RUSTFLAGS, clippy's documented CI form): the
+    # dependencies are compiled once, not once to lint and once more to test. Every target that
+    # `cargo clippy --workspace --all-targets` checks is compiled here: the libraries, tests and
+    # examples, and the Python binding's library (it has no tests).
+    export RUSTFLAGS="-D warnings" RUSTC_WORKSPACE_WRAPPER
+    RUSTC_WORKSPACE_WRAPPER="$(rustup which clippy-driver)"
+    step "rust: clippy + cargo test"; cargo test --workspace --exclude dh-py --locked
+    step "rust: clippy dh-py"; cargo build -p dh-py --features pyo3/extension-module --locked
+    unset RUSTFLAGS RUSTC_WORKSPACE_WRAPPER
+    step "rust: fuzz"; FUZZ_DEV=1 bash scripts/fuzz.sh 8
     step "rust: done"
 }
 rust_lane >"$rust_log" 2>&1 &
@@ -35,7 +43,9 @@ step "ruff";     $PY -m ruff check .
 step "stubtest"; $PY -m mypy.stubtest drivehierarchy._core --allowlist python/stubtest-allowlist.txt
 step "docs";     DISABLE_MKDOCS_2_WARNING=true NO_MKDOCS_2_WARNING=1 $PY -m mkdocs build --strict --quiet --site-dir "$(mktemp -d)"
 step "wheel";    bash scripts/wheel_check.sh
-step "pytest";   $PY -m pytest tests --durations=15 "$@"
+# Two workers, each taking whole files (`--dist loadfile`): a file's module fixtures (the docs
+# walk's shared folder, a loopback server) stay in one process.
+step "pytest";   $PY -m pytest tests -n 2 --dist loadfile --durations=15 "$@"
 step "pytest done; waiting for the Rust lane"
 rust_rc=0
 wait "$rust_pid" || rust_rc=$?
