@@ -20,13 +20,12 @@ rust_lane() {
     # Clippy lints inside the test build, as `cargo clippy` itself does (clippy-driver as the
     # workspace's rustc wrapper; -D warnings as RUSTFLAGS, clippy's documented CI form): the
     # dependencies are compiled once, not once to lint and once more to test. Every target that
-    # `cargo clippy --workspace --all-targets` checks is compiled here: the libraries, tests and
-    # examples, and the Python binding's library (it has no tests).
-    export RUSTFLAGS="-D warnings" RUSTC_WORKSPACE_WRAPPER
-    RUSTC_WORKSPACE_WRAPPER="$(rustup which clippy-driver)"
-    step "rust: clippy + cargo test"; cargo test --workspace --exclude dh-py --locked
-    step "rust: clippy dh-py"; cargo build -p dh-py --features pyo3/extension-module --locked
-    unset RUSTFLAGS RUSTC_WORKSPACE_WRAPPER
+    # `cargo clippy --workspace --all-targets` checks is compiled: libraries, tests, examples.
+    # One package selection throughout (the whole workspace, the Python binding's empty test
+    # harness included): another selection unifies features differently and rebuilds.
+    step "rust: clippy + cargo test"
+    RUSTFLAGS="-D warnings" RUSTC_WORKSPACE_WRAPPER="$(rustup which clippy-driver)" \
+        cargo test --workspace --locked
     step "rust: fuzz"; FUZZ_DEV=1 bash scripts/fuzz.sh 8
     step "rust: done"
 }
