@@ -9,7 +9,8 @@ answers 20 % of requests badly (prose, empty, non-numbers, out of range, JSON), 
 of the request so a repeat gets the same replies. Every task recurs, so repeats of the same
 (scenario, seed, agent) are compared.
 
-Reports (and writes OUT/soak.json): RSS after the warm-up round and at the end (growth %), the
+Reports (and writes OUT/soak.json): RSS after the warm-up round and at the end (growth %; each
+also after glibc's malloc_trim, which a leak survives and allocator retention does not), the
 SUMO processes, child processes, threads and file descriptors left over, and the repeats that
 scored differently. Must hold: RSS growth < 5 %, nothing left over, identical repeats; the exit
 status is 1 otherwise. Linux (reads /proc).
@@ -18,7 +19,6 @@ status is 1 otherwise. Linux (reads /proc).
 from __future__ import annotations
 
 import argparse
-import ctypes
 import gc
 import hashlib
 import json
@@ -32,6 +32,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+from drivehierarchy._heap import release_free_heap
 from drivehierarchy.agents.vlm import VLMOptions
 from drivehierarchy.benchmark.r4 import runner
 from drivehierarchy.scenarios import builtin_scenarios, scenario_id
@@ -107,23 +108,15 @@ def descendants() -> list[tuple[int, str]]:
 OWN_PIDS: set[int] = set()
 
 
-def malloc_trim() -> bool:
-    """glibc's malloc_trim(0): hands the heap's free pages back to the OS. True if it ran."""
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-        return bool(libc.malloc_trim(0)) or True
-    except (OSError, AttributeError):
-        return False
-
-
-def resources() -> dict[str, Any]:
+def resources(trim: bool = False) -> dict[str, Any]:
+    """RSS (as the process holds it) and what is left over. With `trim`, also the RSS after
+    glibc's malloc_trim has returned the free heap pages: a leak survives that, allocator
+    retention does not. Only the warm-up and final figures trim, so the rounds between see the
+    process exactly as a user's run would."""
     gc.collect()
     kids = [(pid, name) for pid, name in descendants() if pid not in OWN_PIDS]
-    raw = rss_mb()
-    trimmed = rss_mb() if malloc_trim() else None
-    return {
-        "rss_mb": round(raw, 1),
-        "rss_trimmed_mb": None if trimmed is None else round(trimmed, 1),
+    out: dict[str, Any] = {
+        "rss_mb": round(rss_mb(), 1),
         "py_blocks": sys.getallocatedblocks(),
         "gc_objects": len(gc.get_objects()),
         "threads": len(os.listdir("/proc/self/task")),
@@ -132,6 +125,9 @@ def resources() -> dict[str, Any]:
         "children": len(kids),
         "sumo_processes": sum("sumo" in n.lower() for _, n in kids),
     }
+    if trim and release_free_heap():
+        out["rss_trimmed_mb"] = round(rss_mb(), 1)
+    return out
 
 
 class Soak:
@@ -145,6 +141,7 @@ class Soak:
         self.errors: list[str] = []
         self.episodes = {"direct": 0, "evaluate": 0}
         self.terminations: dict[str, int] = {}
+        self.rss_by_round: list[float] = []
 
     def _same_as_before(self, key: tuple[str, ...], record: str) -> None:
         record = hashlib.sha256(record.encode()).hexdigest()
@@ -275,7 +272,8 @@ def main(argv: list[str] | None = None) -> int:
             batch = [vlm_scenarios[(v + i) % len(vlm_scenarios)] for i in range(vlm_per_round)]
             soak.evaluate(batch, url, rnd)
             v += vlm_per_round
-            now = resources()
+            now = resources(trim=rnd == warm_round)
+            soak.rss_by_round.append(now["rss_mb"])
             if rnd == warm_round:
                 warm = now
             if warm is not None:
@@ -304,7 +302,7 @@ def write_report(
     out: Path, soak: Soak, warm: dict[str, Any], t0: float, finished: bool
 ) -> tuple[dict[str, Any], bool]:
     """OUT/soak.json (rewritten after every round, so a stopped soak still has its figures)."""
-    end = resources()
+    end = resources(trim=finished)
     growth = 100.0 * (end["rss_mb"] - warm["rss_mb"]) / warm["rss_mb"]
     report = {
         "finished": finished,
@@ -313,6 +311,7 @@ def write_report(
         "warm": warm,
         "end": end,
         "rss_growth_pct": round(growth, 2),
+        "rss_by_round_mb": soak.rss_by_round,
         "left_over": {
             "children": end["children"],
             "sumo_processes": end["sumo_processes"],

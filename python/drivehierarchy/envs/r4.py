@@ -26,6 +26,7 @@ from gymnasium import spaces
 
 from drivehierarchy import _core
 from drivehierarchy._core import ConfigError, SimulationError
+from drivehierarchy._heap import release_free_heap
 from drivehierarchy.envs.config import R4Config
 from drivehierarchy.envs.traffic import resolve_traffic_mode
 from drivehierarchy.envs.traffic.native import make_sumo_traffic, needs_new_session
@@ -238,10 +239,13 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         return self._last_frame
 
     def close(self) -> None:
+        had_world = self._sim is not None
         self._close_traffic()
         self._sim = None
         self._closed = True
         self._live = False
+        if had_world:
+            release_free_heap()  # the world's pages, back to the OS (drivehierarchy._heap)
 
     def _check_open(self, what: str) -> None:
         if self._closed:
