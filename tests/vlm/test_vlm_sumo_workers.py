@@ -19,10 +19,14 @@ from conftest import short_scenarios
 from drivehierarchy.agents.vlm import PayloadOptions, VLMOptions
 from drivehierarchy.benchmark.r4 import runner
 from drivehierarchy.benchmark.r4.workers import WORKER_NAME, running_workers
-from drivehierarchy.envs.config import R4Config
+from drivehierarchy.envs.config import BevConfig, CameraConfig, R4Config
 from drivehierarchy.testing.openai_server import ScriptedOpenAIServer, route_driver
 
 OBSTACLES, SUMO, YIELDING = short_scenarios(3)
+# Small camera and BEV images: the workers must send, save and encode the same frames as the
+# harness process, which any size shows; the protocol's 800 px frames cost most of these tests'
+# time in rendering and PNG/GIF encoding.
+SMALL_IMAGES = R4Config(front=CameraConfig(width=200, height=112), bev=BevConfig(size_px=200, px_per_m=4.0))
 
 
 def _opts(url: str, **kw) -> runner.RunOptions:
@@ -56,10 +60,11 @@ def test_sumo_scenarios_run_at_once_in_workers_and_match_a_sequential_run(tmp_pa
 
     scenarios = [SUMO, OBSTACLES]
     with ScriptedOpenAIServer(policy, latency_s=0.01) as url:
-        serial = runner.evaluate(scenarios, tmp_path / "serial", _opts(url, seeds=3, jobs=1), log=print)
+        small = {"seeds": 3, "config": SMALL_IMAGES}
+        serial = runner.evaluate(scenarios, tmp_path / "serial", _opts(url, jobs=1, **small), log=print)
         assert not any(seen), "with one job everything runs in the harness's process"
         serial_sent, seen[:], sent[:] = list(sent), [], []
-        parallel = runner.evaluate(scenarios, tmp_path / "par", _opts(url, seeds=3, jobs=6), log=print)
+        parallel = runner.evaluate(scenarios, tmp_path / "par", _opts(url, jobs=6, **small), log=print)
     # Three SUMO scenarios at once, each in a worker of its own (a worker is started only when none
     # is free), gone once the run is over.
     assert max(len(s) for s in seen) == 3 and len(set().union(*seen)) == 3
@@ -152,7 +157,7 @@ def test_controls_frames_and_video_in_a_worker_match_the_harness_process(tmp_pat
     with ScriptedOpenAIServer(policy) as url:
         for jobs in (1, 2):
             current["jobs"] = jobs
-            opts = _opts(url, jobs=jobs, frames=True, video=True)
+            opts = _opts(url, jobs=jobs, frames=True, video=True, config=SMALL_IMAGES)
             opts.vlm = dataclasses.replace(opts.vlm, payload=payload)
             (res,) = runner.evaluate([SUMO], tmp_path / str(jobs), opts, log=print)
             scene = tmp_path / str(jobs) / "scenes" / res["key"]
@@ -166,7 +171,7 @@ def test_controls_frames_and_video_in_a_worker_match_the_harness_process(tmp_pat
 
 def test_latency_aware_in_a_worker(tmp_path: Path) -> None:
     with ScriptedOpenAIServer(route_driver, latency_s=0.1) as url:
-        opts = _opts(url, jobs=2)
+        opts = _opts(url, jobs=2, config=SMALL_IMAGES)
         opts.vlm = dataclasses.replace(opts.vlm, latency_aware=True)
         (res,) = runner.evaluate([SUMO], tmp_path / "late", opts, log=print)
     log = [json.loads(x) for x in (tmp_path / "late" / "scenes" / res["key"] / "decisions.jsonl").open()]
