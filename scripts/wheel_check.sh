@@ -21,7 +21,8 @@ if not any(n.startswith("drivehierarchy/_data/scenarios/r4/") for n in names):
     sys.exit("wheel check: the scenario suite is missing from the wheel")
 PY
 python3 -m venv "$work/venv"
-"$work/venv/bin/python" -m pip install --quiet "$wheel"
+# uv installs the wheel and its dependencies as pip would, from the cache install.sh filled.
+.venv/bin/uv pip install --quiet --python "$work/venv/bin/python" "$wheel"
 # No cargo/rustc: the wheel must need nothing but itself and its Python dependencies.
 (cd "$work" && env -u SUMO_HOME PATH="$work/venv/bin:/usr/local/bin:/usr/bin:/bin" \
     "$work/venv/bin/python" "$OLDPWD/scripts/wheel_smoke.py" "$work" "$OLDPWD/../shared/official/Open_Loop_Evaluation")
