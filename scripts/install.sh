@@ -108,7 +108,7 @@ env -u SUMO_HOME "$VPY" -m pip install --quiet --no-deps -e . || build_rc=$?
 deps_rc=0
 wait "$deps_pid" || deps_rc=$?
 if [ "$deps_rc" != 0 ]; then
-    echo "install: installing the dependencies${extras:+ of [$extras]} failed (pip exit $deps_rc, its output is above)" >&2
+    echo "install: installing the dependencies${extras:+ of [$extras]} failed (uv exit $deps_rc, its output is above)" >&2
     exit "$deps_rc"
 fi
 if [ "$build_rc" != 0 ]; then
