@@ -2,8 +2,8 @@
 
 A world (its map, rasteriser buffers, SUMO's network) is freed when its env closes, but glibc
 keeps freed pages in its arenas, one per thread that allocated, for reuse. A long evaluation
-that opens worlds from worker threads therefore grows in RSS with nothing leaked: 10,000 soak
-episodes grew 9 % before this (docs/robustness.md). `release_free_heap()` runs glibc's
+that opens worlds from worker threads therefore grows in RSS though nothing is held: most of
+the 9 % that 10,000 soak episodes grew before this (docs/robustness.md). `release_free_heap()` runs glibc's
 `malloc_trim(0)` (about a millisecond) so the footprint follows what is really held; on other C
 libraries it does nothing.
 """
