@@ -4,46 +4,64 @@
 # included), the wheel smoke test from a fresh venv, and a bounded run of every fuzz target.
 # Installs every extra into .venv first.
 #
-# Two lanes run side by side: the Rust lane (fmt, clippy, cargo test, fuzzing; it needs no
-# Python) starts at once in the background, while the Python lane installs, checks and runs
-# pytest (two workers). Both share the two cores evenly: at a lower priority the Rust lane's
-# build chain starved and ended 70 s after pytest (951 s vs 883 s without). Each step prints when it starts; the Rust lane's
-# output is printed when it ends, and the script fails if either lane failed.
+# Two lanes run side by side on the two cores. The Python lane installs (building the Rust core
+# with maturin while uv installs the dependencies), checks and runs pytest (two workers). The
+# Rust lane formats, fuzzes (its own nightly build), then waits for the install's build and runs
+# clippy + the Rust tests on that same build, and the wheel check. Each step prints when it
+# starts; the Rust lane's output is printed when it ends, and the script fails if either failed.
+#
+# One release build serves the extension, clippy, the Rust tests and the wheel: the install, the
+# wheel and `cargo test --release` get the same profile, flags, features and build-script inputs
+# (BUILD below; PYO3_PYTHON / PYO3_CONFIG_FILE as maturin sets them), so cargo reuses every
+# dependency and compiles only the test targets (~120 CPU-s instead of a ~360 CPU-s dev build).
+#   - clippy-driver as the workspace's rustc wrapper with -D warnings (clippy's documented CI
+#     form) lints every target it compiles: libraries, tests, examples. Dependencies are not
+#     wrapped and their lints are capped, so they build as in any release build.
+#   - No LTO here: each test binary would redo it (cargo test --release with LTO costs 880
+#     CPU-s); the code is the same. The release profile keeps thin LTO for users' installs.
+#   - Overflow checks and debug assertions on, as the dev profile has them: the Rust tests keep
+#     them, and pytest runs against an extension that has them too.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 start=$SECONDS
 step() { echo "== $1 (at $((SECONDS - start)) s)"; }
 
+BUILD=(
+    RUSTFLAGS="-D warnings"
+    RUSTC_WORKSPACE_WRAPPER="$(rustup which clippy-driver)"
+    CARGO_PROFILE_RELEASE_LTO=false
+    CARGO_PROFILE_RELEASE_OVERFLOW_CHECKS=true
+    CARGO_PROFILE_RELEASE_DEBUG_ASSERTIONS=true
+)
 rust_log="$(mktemp)"
+built="$(mktemp -u)"  # exists once the install has built the extension
 rust_lane() {
     set -euo pipefail
     step "rust: cargo fmt"; cargo fmt --all -- --check
-    # Clippy lints inside the test build, as `cargo clippy` itself does (clippy-driver as the
-    # workspace's rustc wrapper; -D warnings as RUSTFLAGS, clippy's documented CI form): the
-    # dependencies are compiled once, not once to lint and once more to test. Every target that
-    # `cargo clippy --workspace --all-targets` checks is compiled: libraries, tests, examples.
-    # One package selection throughout (the whole workspace, the Python binding's empty test
-    # harness included): another selection unifies features differently and rebuilds. pyo3's
-    # extension-module feature, as maturin builds it, links no libpython into that harness.
-    step "rust: clippy + cargo test"
-    RUSTFLAGS="-D warnings" RUSTC_WORKSPACE_WRAPPER="$(rustup which clippy-driver)" \
-        cargo test --workspace --features pyo3/extension-module --locked
     step "rust: fuzz"; FUZZ_DEV=1 bash scripts/fuzz.sh 8
+    step "rust: waiting for the install's build"
+    until [ -e "$built" ]; do sleep 1; done
+    step "rust: clippy + cargo test (the install's build)"
+    local config pyo3=(PYO3_PYTHON="$PWD/.venv/bin/python")
+    config="$(ls "${CARGO_TARGET_DIR:-target}"/maturin/pyo3-config-*.txt 2>/dev/null | head -1 || true)"
+    if [ -n "$config" ]; then pyo3+=(PYO3_CONFIG_FILE="$(realpath "$config")"); fi
+    env -u SUMO_HOME "${BUILD[@]}" "${pyo3[@]}" cargo test --release --workspace --features pyo3/extension-module --locked
+    step "rust: wheel"; env "${BUILD[@]}" bash scripts/wheel_check.sh
     step "rust: done"
 }
 rust_lane >"$rust_log" 2>&1 &
 rust_pid=$!
 # A failing Python lane (set -e) must not leave the Rust lane running.
-trap 'pkill -P "$rust_pid" 2>/dev/null; kill "$rust_pid" 2>/dev/null || true' EXIT
+trap 'pkill -P "$rust_pid" 2>/dev/null; kill "$rust_pid" 2>/dev/null || true; rm -f "$built"' EXIT
 
-bash scripts/install.sh all
+env "${BUILD[@]}" bash scripts/install.sh all
+touch "$built"
 PY=.venv/bin/python
 export PATH="$PWD/.venv/bin:$PATH"
 step "ruff";     $PY -m ruff check .
                  $PY -m ruff format --check .
 step "stubtest"; $PY -m mypy.stubtest drivehierarchy._core --allowlist python/stubtest-allowlist.txt
 step "docs";     DISABLE_MKDOCS_2_WARNING=true NO_MKDOCS_2_WARNING=1 $PY -m mkdocs build --strict --quiet --site-dir "$(mktemp -d)"
-step "wheel";    bash scripts/wheel_check.sh
 # Two workers, each taking whole files (`--dist loadfile`): a file's module fixtures (the docs
 # walk's shared folder, a loopback server) stay in one process.
 step "pytest";   $PY -m pytest tests -n 2 --dist loadfile --durations=15 "$@"
@@ -51,7 +69,8 @@ step "pytest done; waiting for the Rust lane"
 rust_rc=0
 wait "$rust_pid" || rust_rc=$?
 trap - EXIT
-echo "---- Rust lane (fmt, clippy, cargo test, fuzz) ----"
+rm -f "$built"
+echo "---- Rust lane (fmt, fuzz, clippy, cargo test, wheel) ----"
 cat "$rust_log"
 rm -f "$rust_log"
 if [ "$rust_rc" != 0 ]; then

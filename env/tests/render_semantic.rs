@@ -293,19 +293,18 @@ fn empty_network_renders_sky_ground_and_actors() {
 }
 
 #[test]
-fn real_net_builds_fast_when_present() {
+fn real_net_builds_when_present() {
     let path = Path::new("../../shared/official/Close_Loop_Evaluation/Carla_Simulation/Co-Simulation/Sumo/tongji/tongji.net.xml");
     if !path.exists() {
         eprintln!("skipping: {} not present", path.display());
         return;
     }
     let net = Network::from_file(path).unwrap();
-    let t = std::time::Instant::now();
+    // Its build time (~70 ms in release) is a benchmark figure, not asserted: no test here
+    // decides by the clock.
     let map = RenderMap::build(&net);
     let (tris, segs, props) = map.stats();
     assert!(tris > 10_000 && segs > 5_000 && props > 0, "{:?}", map.stats());
-    // Debug builds are slower; the release figure is ~70 ms.
-    assert!(t.elapsed().as_secs_f64() < 10.0);
 }
 
 /// Lit turn indicators (SUMO's blinker bits) show as amber lamps on the signalling side.
