@@ -6,7 +6,8 @@
 # Builds the cargo-fuzz targets in fuzz/ (nightly; installs cargo-fuzz when missing), seeds each
 # target's corpus (fuzz/corpus/TARGET, kept between runs) from the project's own files, and runs
 # every target for SECONDS_PER_TARGET (default 15) in one process. Exits non-zero if any target
-# finds a crash; the input is left in fuzz/artifacts/TARGET/.
+# finds a crash; the input is left in fuzz/artifacts/TARGET/. FUZZ_DEV=1 builds the dev profile
+# (below); FUZZ_BUILD_ONLY=1 only builds.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$PWD
@@ -56,6 +57,8 @@ else
     cgu=(--codegen-units "${FUZZ_CODEGEN_UNITS:-16}")
 fi
 (cd fuzz && cargo +nightly fuzz build -s none "${cgu[@]}")
+# FUZZ_BUILD_ONLY=1: build, run nothing (scripts/test.sh builds early, runs later).
+if [ "${FUZZ_BUILD_ONLY:-0}" = 1 ]; then exit 0; fi
 mkdir -p fuzz/artifacts
 failed=()
 for t in "${targets[@]}"; do

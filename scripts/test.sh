@@ -6,9 +6,11 @@
 #
 # Two lanes run side by side on the two cores. The Python lane installs (building the Rust core
 # with maturin while uv installs the dependencies), checks and runs pytest (two workers). The
-# Rust lane formats, fuzzes (its own nightly build), then waits for the install's build and runs
-# clippy + the Rust tests on that same build, and the wheel check. Each step prints when it
-# starts; the Rust lane's output is printed when it ends, and the script fails if either failed.
+# Rust lane formats and builds the fuzz targets (its own nightly build, filling the core the
+# install's build chain leaves idle), then waits for the install's build and runs clippy + the
+# Rust tests on that same build, the wheel check, and the bounded fuzz run (single-threaded: it
+# fills pytest's idle moments). Each step prints when it starts; the Rust lane's output is
+# printed when it ends, and the script fails if either lane failed.
 #
 # One release build serves the extension, clippy, the Rust tests and the wheel: the install, the
 # wheel and `cargo test --release` get the same profile, flags, features and build-script inputs
@@ -38,7 +40,7 @@ built="$(mktemp -u)"  # exists once the install has built the extension
 rust_lane() {
     set -euo pipefail
     step "rust: cargo fmt"; cargo fmt --all -- --check
-    step "rust: fuzz"; FUZZ_DEV=1 bash scripts/fuzz.sh 8
+    step "rust: fuzz build"; FUZZ_DEV=1 FUZZ_BUILD_ONLY=1 bash scripts/fuzz.sh
     step "rust: waiting for the install's build"
     until [ -e "$built" ]; do sleep 1; done
     step "rust: clippy + cargo test (the install's build)"
@@ -47,6 +49,7 @@ rust_lane() {
     if [ -n "$config" ]; then pyo3+=(PYO3_CONFIG_FILE="$(realpath "$config")"); fi
     env -u SUMO_HOME "${BUILD[@]}" "${pyo3[@]}" cargo test --release --workspace --features pyo3/extension-module --locked
     step "rust: wheel"; env "${BUILD[@]}" bash scripts/wheel_check.sh
+    step "rust: fuzz (5 s per target)"; FUZZ_DEV=1 bash scripts/fuzz.sh 5
     step "rust: done"
 }
 rust_lane >"$rust_log" 2>&1 &

@@ -1,0 +1,186 @@
+"""Where a long run's memory growth comes from: RSS per episode with and without SUMO in-process.
+
+    python scripts/sumo_retention.py [--episodes 600] [--traci]
+
+Each variant runs in a fresh process over the suite's SUMO scenarios (images off, 40 decisions =
+200 ticks per episode), and reports its RSS after glibc's malloc_trim once every scenario has run
+(the warm-up) and at the end, as KB per episode, side by side:
+
+  env, traffic "none"       drivehierarchy alone: no SUMO in the process
+  env, SUMO (shim)          libsumo's C++ API in this process (the soak's and `auto`'s transport)
+  env, SUMO (module)        SUMO's `libsumo` Python module in this process
+  libsumo alone             SUMO's `libsumo` module replaying the env's exact start commands, then
+                            200 `simulationStep()`s and `close()`: no drivehierarchy code runs
+  env, SUMO (TraCI)         SUMO in a subprocess (`--traci`; each start waits ~1 s for SUMO's port)
+
+What libsumo keeps per load shows up in the last three alike; drivehierarchy's own growth is
+the first. Linux with glibc (reads /proc, calls malloc_trim).
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from drivehierarchy._heap import release_free_heap
+from drivehierarchy.scenarios import builtin_scenarios
+
+DECISIONS = 40
+TICKS = DECISIONS * 5
+VARIANTS = {
+    "none": 'env, traffic "none"',
+    "shim": "env, SUMO (shim)",
+    "module": "env, SUMO (module)",
+    "alone": "libsumo alone",
+    "traci": "env, SUMO (TraCI)",
+}
+
+
+def rss_mb() -> float:
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024.0
+    raise RuntimeError("no VmRSS in /proc/self/status")
+
+
+def trimmed_rss() -> float:
+    gc.collect()
+    release_free_heap()
+    return rss_mb()
+
+
+def sumo_scenarios() -> list[Path]:
+    def runs_sumo(p: Path) -> bool:
+        return tomllib.loads(p.read_text(encoding="utf-8")).get("traffic", {}).get("mode") == "sumo"
+
+    return [p for p in builtin_scenarios() if runs_sumo(p)]
+
+
+def env_episode(scenario: Path, variant: str) -> None:
+    from drivehierarchy.envs.r4 import DriveHierarchyR4Env
+
+    kw: dict[str, Any] = {"front": None, "bev": None}
+    if variant == "none":
+        kw["traffic"] = "none"
+    else:
+        kw["sumo_backend"] = {"shim": "native", "module": "python", "traci": "traci"}[variant]
+    env = DriveHierarchyR4Env(scenario=str(scenario), **kw)
+    try:
+        env.reset(seed=0)
+        for _ in range(DECISIONS):
+            _, _, terminated, truncated, _ = env.step([0.0, 6.0])
+            if terminated or truncated:
+                break
+    finally:
+        env.close()
+
+
+def recorded_commands(scenarios: list[Path], keep: Path) -> list[list[str]]:
+    """The libsumo start command of each scenario's env, with its temporary files kept in `keep`."""
+    import libsumo
+
+    cmds: list[list[str]] = []
+    start = libsumo.start
+
+    def record(cmd: list[str], *args: Any, **kwargs: Any) -> Any:
+        cmd = list(cmd)
+        for i, tok in enumerate(cmd):
+            # The env's per-run folder is removed at close: its inputs are copied, outputs moved.
+            if tok.startswith(tempfile.gettempdir()) and not tok.startswith(str(keep)):
+                dest = keep / f"{len(cmds)}_{i}_{os.path.basename(tok)}"
+                if os.path.isfile(tok):
+                    shutil.copy(tok, dest)
+                cmd[i] = str(dest)
+        cmds.append(cmd)
+        return start(cmd, *args, **kwargs)
+
+    libsumo.start = record
+    try:
+        for s in scenarios:
+            env_episode(s, "module")
+    finally:
+        libsumo.start = start
+    return cmds
+
+
+def run_variant(variant: str, episodes: int) -> dict[str, Any]:
+    scenarios = sumo_scenarios()
+    if variant == "alone":
+        import libsumo
+
+        keep = Path(tempfile.mkdtemp(prefix="dh_retention_"))
+        cmds = recorded_commands(scenarios, keep)
+
+        def episode(i: int) -> None:
+            libsumo.start(cmds[i % len(cmds)])
+            for _ in range(TICKS):
+                libsumo.simulationStep()
+            libsumo.close()
+
+    else:
+
+        def episode(i: int) -> None:
+            env_episode(scenarios[i % len(scenarios)], variant)
+
+    warm_up = len(scenarios)
+    for i in range(warm_up):
+        episode(i)
+    warm = trimmed_rss()
+    for i in range(warm_up, warm_up + episodes):
+        episode(i)
+    end = trimmed_rss()
+    if variant == "alone":
+        shutil.rmtree(keep, ignore_errors=True)
+    return {
+        "variant": variant,
+        "episodes": episodes,
+        "warm_mb": round(warm, 1),
+        "end_mb": round(end, 1),
+        "kb_per_episode": round((end - warm) * 1024.0 / episodes, 2),
+        "growth_pct": round(100.0 * (end - warm) / warm, 2),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--episodes", type=int, default=600, help="episodes after the warm-up (600)")
+    ap.add_argument("--traci", action="store_true", help="also SUMO over TraCI (slow: ~1 s per start)")
+    ap.add_argument("--variant", choices=sorted(VARIANTS), help=argparse.SUPPRESS)  # one child's run
+    a = ap.parse_args(argv)
+    if a.variant:
+        print(json.dumps(run_variant(a.variant, a.episodes)), flush=True)
+        return 0
+    variants = ["none", "shim", "module", "alone"] + (["traci"] if a.traci else [])
+    n = len(sumo_scenarios())
+    print(f"{a.episodes} episodes over {n} SUMO scenarios, {TICKS} ticks each, after a warm-up pass")
+    print(f"{'':28} {'RSS warm':>9} {'RSS end':>9} {'KB/episode':>11} {'growth':>8}")
+    for v in variants:
+        done = subprocess.run(
+            [sys.executable, __file__, "--variant", v, "--episodes", str(a.episodes)],
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+        if done.returncode != 0:
+            print(f"{VARIANTS[v]}: failed (exit {done.returncode})\n{done.stderr[-2000:]}", file=sys.stderr)
+            return 1
+        r = json.loads(done.stdout.strip().splitlines()[-1])
+        print(
+            f"{VARIANTS[v]:28} {r['warm_mb']:8.1f}M {r['end_mb']:8.1f}M {r['kb_per_episode']:11.2f}"
+            f" {r['growth_pct']:7.2f}%",
+            flush=True,
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
