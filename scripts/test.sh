@@ -15,7 +15,7 @@
 # One release build serves the extension, clippy, the Rust tests and the wheel: the install, the
 # wheel and `cargo test --release` get the same profile, flags, features and build-script inputs
 # (BUILD below; PYO3_PYTHON / PYO3_CONFIG_FILE as maturin sets them), so cargo reuses every
-# dependency and compiles only the test targets (~120 CPU-s instead of a ~360 CPU-s dev build).
+# dependency and compiles only the test targets (~110 CPU-s instead of a ~360 CPU-s dev build).
 #   - clippy-driver as the workspace's rustc wrapper with -D warnings (clippy's documented CI
 #     form) lints every target it compiles: libraries, tests, examples. Dependencies are not
 #     wrapped and their lints are capped, so they build as in any release build.
@@ -47,7 +47,9 @@ rust_lane() {
     local config pyo3=(PYO3_PYTHON="$PWD/.venv/bin/python")
     config="$(ls "${CARGO_TARGET_DIR:-target}"/maturin/pyo3-config-*.txt 2>/dev/null | head -1 || true)"
     if [ -n "$config" ]; then pyo3+=(PYO3_CONFIG_FILE="$(realpath "$config")"); fi
-    env -u SUMO_HOME "${BUILD[@]}" "${pyo3[@]}" cargo test --release --workspace --features pyo3/extension-module --locked
+    # One job: pytest (the critical path) keeps most of the cores; this lane has slack.
+    env -u SUMO_HOME "${BUILD[@]}" "${pyo3[@]}" cargo test --release --workspace --features pyo3/extension-module \
+        --locked --jobs 1
     step "rust: wheel"; env "${BUILD[@]}" bash scripts/wheel_check.sh
     step "rust: fuzz (5 s per target)"; FUZZ_DEV=1 bash scripts/fuzz.sh 5
     step "rust: done"
