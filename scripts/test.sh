@@ -5,7 +5,7 @@
 # Installs every extra into .venv first.
 #
 # Two lanes run side by side on the two cores. The Python lane installs (building the Rust core
-# with maturin while uv installs the dependencies), checks and runs pytest (two workers). The
+# with maturin while uv installs the dependencies), checks and runs pytest (three workers). The
 # Rust lane formats and builds the fuzz targets (its own nightly build, filling the core the
 # install's build chain leaves idle), then waits for the install's build and runs clippy + the
 # Rust tests on that same build, the wheel check, and the bounded fuzz run (single-threaded: it
@@ -40,7 +40,9 @@ built="$(mktemp -u)"  # exists once the install has built the extension
 rust_lane() {
     set -euo pipefail
     step "rust: cargo fmt"; cargo fmt --all -- --check
-    step "rust: fuzz build"; FUZZ_DEV=1 FUZZ_BUILD_ONLY=1 bash scripts/fuzz.sh
+    # At a lower priority: the install's build (the critical path) comes first, this fills the
+    # core its build chain leaves idle.
+    step "rust: fuzz build"; FUZZ_DEV=1 FUZZ_BUILD_ONLY=1 nice -n 10 bash scripts/fuzz.sh
     step "rust: waiting for the install's build"
     until [ -e "$built" ]; do sleep 1; done
     step "rust: clippy + cargo test (the install's build)"
@@ -67,9 +69,11 @@ step "ruff";     $PY -m ruff check .
                  $PY -m ruff format --check .
 step "stubtest"; $PY -m mypy.stubtest drivehierarchy._core --allowlist python/stubtest-allowlist.txt
 step "docs";     DISABLE_MKDOCS_2_WARNING=true NO_MKDOCS_2_WARNING=1 $PY -m mkdocs build --strict --quiet --site-dir "$(mktemp -d)"
-# Two workers, each taking whole files (`--dist loadfile`): a file's module fixtures (the docs
-# walk's shared folder, a loopback server) stay in one process.
-step "pytest";   $PY -m pytest tests -n 2 --dist loadfile --durations=15 "$@"
+# Three workers on two cores, each taking whole files (`--dist loadfile`: a file's module
+# fixtures, the docs walk's shared folder or a loopback server, stay in one process). Many tests
+# wait on subprocesses and servers, so a third worker fills those waits, and it gives the
+# critical path a larger share of the cores while the Rust lane still runs.
+step "pytest";   $PY -m pytest tests -n 3 --dist loadfile --durations=15 "$@"
 step "pytest done; waiting for the Rust lane"
 rust_rc=0
 wait "$rust_pid" || rust_rc=$?
