@@ -4,13 +4,12 @@
 # included), the wheel smoke test from a fresh venv, and a bounded run of every fuzz target.
 # Installs every extra into .venv first.
 #
-# Two lanes run side by side on the two cores. The Python lane installs (building the Rust core
-# with maturin while uv installs the dependencies), checks and runs pytest (three workers). The
-# Rust lane formats and builds the fuzz targets (its own nightly build, filling the core the
-# install's build chain leaves idle), then waits for the install's build and runs clippy + the
-# Rust tests on that same build, the wheel check, and the bounded fuzz run (single-threaded: it
-# fills pytest's idle moments). Each step prints when it starts; the Rust lane's output is
-# printed when it ends, and the script fails if either lane failed.
+# Two lanes share the two cores. The Python lane installs (building the Rust core with maturin
+# while uv installs the dependencies), checks and runs pytest (three workers). The Rust lane
+# formats, waits for the install's build, then runs clippy + the Rust tests on that same build,
+# the wheel check, and builds and runs the fuzz targets (5 s each) beside pytest. Each step
+# prints when it starts; the Rust lane's output is printed when it ends, and the script fails
+# if either lane failed.
 #
 # One release build serves the extension, clippy, the Rust tests and the wheel: the install, the
 # wheel and `cargo test --release` get the same profile, flags, features and build-script inputs
@@ -40,20 +39,17 @@ built="$(mktemp -u)"  # exists once the install has built the extension
 rust_lane() {
     set -euo pipefail
     step "rust: cargo fmt"; cargo fmt --all -- --check
-    # At a lower priority: the install's build (the critical path) comes first, this fills the
-    # core its build chain leaves idle.
-    step "rust: fuzz build"; FUZZ_DEV=1 FUZZ_BUILD_ONLY=1 nice -n 10 bash scripts/fuzz.sh
+    # The install's build is the critical path: it gets the cores alone (at a lower priority
+    # beside it, the fuzz build starved behind pytest and ended the run 160 s late).
     step "rust: waiting for the install's build"
     until [ -e "$built" ]; do sleep 1; done
     step "rust: clippy + cargo test (the install's build)"
     local config pyo3=(PYO3_PYTHON="$PWD/.venv/bin/python")
     config="$(ls "${CARGO_TARGET_DIR:-target}"/maturin/pyo3-config-*.txt 2>/dev/null | head -1 || true)"
     if [ -n "$config" ]; then pyo3+=(PYO3_CONFIG_FILE="$(realpath "$config")"); fi
-    # One job: pytest (the critical path) keeps most of the cores; this lane has slack.
-    env -u SUMO_HOME "${BUILD[@]}" "${pyo3[@]}" cargo test --release --workspace --features pyo3/extension-module \
-        --locked --jobs 1
+    env -u SUMO_HOME "${BUILD[@]}" "${pyo3[@]}" cargo test --release --workspace --features pyo3/extension-module --locked
     step "rust: wheel"; env "${BUILD[@]}" bash scripts/wheel_check.sh
-    step "rust: fuzz (5 s per target)"; FUZZ_DEV=1 bash scripts/fuzz.sh 5
+    step "rust: fuzz"; FUZZ_DEV=1 bash scripts/fuzz.sh 5
     step "rust: done"
 }
 rust_lane >"$rust_log" 2>&1 &
