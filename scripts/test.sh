@@ -5,11 +5,11 @@
 # Installs every extra into .venv first.
 #
 # Two lanes share the two cores. The Python lane installs (building the Rust core with maturin
-# while uv installs the dependencies), checks and runs pytest (three workers). The Rust lane
-# formats, waits for the install's build, then runs clippy + the Rust tests on that same build,
-# the wheel check, and builds and runs the fuzz targets (5 s each) beside pytest. Each step
-# prints when it starts; the Rust lane's output is printed when it ends, and the script fails
-# if either lane failed.
+# while uv installs the dependencies), checks and runs pytest (two workers). The Rust lane
+# formats, builds and runs the fuzz targets (5 s each), waits for the install's build, then runs
+# clippy + the Rust tests on that same build and the wheel check. Each step prints when it
+# starts; the Rust lane's output is printed when it ends, and the script fails if either lane
+# failed.
 #
 # One release build serves the extension, clippy, the Rust tests and the wheel: the install, the
 # wheel and `cargo test --release` get the same profile, flags, features and build-script inputs
@@ -39,8 +39,10 @@ built="$(mktemp -u)"  # exists once the install has built the extension
 rust_lane() {
     set -euo pipefail
     step "rust: cargo fmt"; cargo fmt --all -- --check
-    # The install's build is the critical path: it gets the cores alone (at a lower priority
-    # beside it, the fuzz build starved behind pytest and ended the run 160 s late).
+    # The fuzz build and run first, beside the install: they fill the core its build chain and
+    # downloads leave idle. (Measured alternatives, all slower: at nice 10 the fuzz build starved
+    # behind pytest; after the Rust tests it slowed pytest more than it slows the install.)
+    step "rust: fuzz"; FUZZ_DEV=1 bash scripts/fuzz.sh 5
     step "rust: waiting for the install's build"
     until [ -e "$built" ]; do sleep 1; done
     step "rust: clippy + cargo test (the install's build)"
@@ -49,7 +51,6 @@ rust_lane() {
     if [ -n "$config" ]; then pyo3+=(PYO3_CONFIG_FILE="$(realpath "$config")"); fi
     env -u SUMO_HOME "${BUILD[@]}" "${pyo3[@]}" cargo test --release --workspace --features pyo3/extension-module --locked
     step "rust: wheel"; env "${BUILD[@]}" bash scripts/wheel_check.sh
-    step "rust: fuzz"; FUZZ_DEV=1 bash scripts/fuzz.sh 5
     step "rust: done"
 }
 rust_lane >"$rust_log" 2>&1 &
@@ -65,11 +66,10 @@ step "ruff";     $PY -m ruff check .
                  $PY -m ruff format --check .
 step "stubtest"; $PY -m mypy.stubtest drivehierarchy._core --allowlist python/stubtest-allowlist.txt
 step "docs";     DISABLE_MKDOCS_2_WARNING=true NO_MKDOCS_2_WARNING=1 $PY -m mkdocs build --strict --quiet --site-dir "$(mktemp -d)"
-# Three workers on two cores, each taking whole files (`--dist loadfile`: a file's module
-# fixtures, the docs walk's shared folder or a loopback server, stay in one process). Many tests
-# wait on subprocesses and servers, so a third worker fills those waits, and it gives the
-# critical path a larger share of the cores while the Rust lane still runs.
-step "pytest";   $PY -m pytest tests -n 3 --dist loadfile --durations=15 "$@"
+# Two workers, each taking whole files (`--dist loadfile`): a file's module fixtures (the docs
+# walk's shared folder, a loopback server) stay in one process. (Three were not faster: the work
+# is CPU-bound.)
+step "pytest";   $PY -m pytest tests -n 2 --dist loadfile --durations=15 "$@"
 step "pytest done; waiting for the Rust lane"
 rust_rc=0
 wait "$rust_pid" || rust_rc=$?
