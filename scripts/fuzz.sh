@@ -57,7 +57,7 @@ else
     cgu=(--codegen-units "${FUZZ_CODEGEN_UNITS:-16}")
 fi
 (cd fuzz && cargo +nightly fuzz build -s none "${cgu[@]}")
-# FUZZ_BUILD_ONLY=1: build, run nothing (scripts/test.sh builds early, runs later).
+# FUZZ_BUILD_ONLY=1: build, run nothing (to build ahead of a run timed by the clock).
 if [ "${FUZZ_BUILD_ONLY:-0}" = 1 ]; then exit 0; fi
 mkdir -p fuzz/artifacts
 failed=()
