@@ -27,9 +27,10 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import tomllib
 from pathlib import Path
 from typing import Any
+
+from soak import rss_mb, runs_sumo  # scripts/ is this script's first import path
 
 from drivehierarchy._heap import release_free_heap
 from drivehierarchy.scenarios import builtin_scenarios
@@ -45,13 +46,6 @@ VARIANTS = {
 }
 
 
-def rss_mb() -> float:
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024.0
-    raise RuntimeError("no VmRSS in /proc/self/status")
-
-
 def trimmed_rss() -> float:
     gc.collect()
     release_free_heap()
@@ -59,9 +53,6 @@ def trimmed_rss() -> float:
 
 
 def sumo_scenarios() -> list[Path]:
-    def runs_sumo(p: Path) -> bool:
-        return tomllib.loads(p.read_text(encoding="utf-8")).get("traffic", {}).get("mode") == "sumo"
-
     return [p for p in builtin_scenarios() if runs_sumo(p)]
 
 
