@@ -2,7 +2,7 @@
 //! lane changes (cut-ins), traffic-light overrides and per-vehicle traffic speeds — parsing,
 //! validation errors (file, TOML path, value) and runtime behaviour, and determinism.
 
-mod common;
+use crate::common;
 
 use common::{cruise, Town01Scenarios};
 use dh_env::drive::Control;

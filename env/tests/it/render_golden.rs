@@ -2,7 +2,7 @@
 //! camera and BEV frames compared with committed PNGs under `tests/golden/`.
 //!
 //! Re-bless after an intended change (then look at the PNGs before committing):
-//! `DH_BLESS=1 cargo test -p dh-env --test render_golden`
+//! `DH_BLESS=1 cargo test -p dh-env --test it render_golden`
 //!
 //! Tolerance: rendering is deterministic, but float rounding may differ across CPUs/compilers
 //! at triangle edges, so up to 0.5 % of pixels may differ (by any amount).

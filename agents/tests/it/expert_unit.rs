@@ -1,6 +1,6 @@
 //! Single-decision behaviour of the expert on synthetic inputs.
 
-mod expert_support;
+use crate::expert_support;
 
 use std::f64::consts::FRAC_PI_2;
 

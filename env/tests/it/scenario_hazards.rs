@@ -3,7 +3,7 @@
 //! collision, distance, ETA or another actor's event, cut-ins paced beside the ego, brake lamps
 //! of a standing vehicle. The point of each: a hazard-blind ego meets the hazard at any speed.
 
-mod common;
+use crate::common;
 
 use common::{cruise, Town01Scenarios};
 use dh_env::drive::Control;

@@ -293,7 +293,7 @@ fn drive(s: &ResolvedScenario, careful: bool, bridge: bool) -> Outcome {
 }
 
 // Solvability of the suite is checked with the privileged expert, which also swerves around
-// obstacles and waits for gaps: `agents/tests/expert_r4.rs` (every scenario, no live traffic) and
+// obstacles and waits for gaps: `agents/tests/it/expert_r4.rs` (every scenario, no live traffic) and
 // `tests/scenarios/test_suite.py` (every scenario with its own traffic, through the env).
 
 /// The hazard scenarios must actually be hazardous: the same driver blind to actors crashes.

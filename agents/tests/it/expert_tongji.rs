@@ -3,7 +3,7 @@
 //! tongji network, driven without traffic in the stand-in closed loop. The ego centre must stay
 //! on drivable ground and the route be finished efficiently. Skips when the files are absent.
 
-mod expert_support;
+use crate::expert_support;
 
 use dh_agents::expert::ExpertParams;
 use dh_env::map::Network;

@@ -3,7 +3,7 @@
 //! roundabout), driven in the stand-in closed loop. The ego centre must never leave the
 //! drivable area (the protocol's off-road rule) and the efficiency must stay high.
 
-mod expert_support;
+use crate::expert_support;
 
 use dh_agents::expert::ExpertParams;
 use dh_env::map::{EdgeFunction, Network, VClass};

@@ -2,7 +2,7 @@
 //! kinematic bicycle at 20 Hz, decisions at 4 Hz): it must finish without collision, stay in its
 //! lane, never rest long enough to trip the blocked timeout, and keep S_eff high.
 
-mod expert_support;
+use crate::expert_support;
 
 use std::f64::consts::FRAC_PI_2;
 

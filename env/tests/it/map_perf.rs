@@ -1,6 +1,6 @@
 //! Load and query timings of the map module on real networks. Ignored by default (timings
 //! are not assertions); run with
-//! `cargo test -p dh-env --release --test map_perf -- --ignored --nocapture`.
+//! `cargo test -p dh-env --release --test it map_perf -- --ignored --nocapture`.
 
 use dh_env::geom::Vec2;
 use dh_env::map::Network;
