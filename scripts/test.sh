@@ -14,7 +14,7 @@
 # One release build serves the extension, clippy, the Rust tests and the wheel: the install, the
 # wheel and `cargo test --release` get the same profile, flags, features and build-script inputs
 # (BUILD below; PYO3_PYTHON / PYO3_CONFIG_FILE as maturin sets them), so cargo reuses every
-# dependency and compiles only the test targets (~110 CPU-s instead of a ~360 CPU-s dev build).
+# dependency and compiles only the test targets (~70 CPU-s instead of a ~360 CPU-s dev build).
 #   - clippy-driver as the workspace's rustc wrapper with -D warnings (clippy's documented CI
 #     form) lints every target it compiles: libraries, tests, examples. Dependencies are not
 #     wrapped and their lints are capped, so they build as in any release build.
