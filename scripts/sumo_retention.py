@@ -11,10 +11,13 @@ Each variant runs in a fresh process over the suite's SUMO scenarios (images off
   env, SUMO (module)        SUMO's `libsumo` Python module in this process
   libsumo alone             SUMO's `libsumo` module replaying the env's exact start commands, then
                             200 `simulationStep()`s and `close()`: no drivehierarchy code runs
+  libsumo, loads only       the same starts, then `close()` at once (no step)
+  libsumo, networks only    `sumo --net-file NET` of the same scenarios, then `close()`: no routes,
+                            no options of ours
   env, SUMO (TraCI)         SUMO in a subprocess (`--traci`; each start waits ~1 s for SUMO's port)
 
-What libsumo keeps per load shows up in the last three alike; drivehierarchy's own growth is
-the first. Linux with glibc (reads /proc, calls malloc_trim).
+What libsumo keeps per load shows up in every SUMO variant alike, stepped or not, with our
+routes and options or the bare network; drivehierarchy's own growth is the first. Linux with glibc (reads /proc, calls malloc_trim).
 """
 
 from __future__ import annotations
@@ -42,6 +45,8 @@ VARIANTS = {
     "shim": "env, SUMO (shim)",
     "module": "env, SUMO (module)",
     "alone": "libsumo alone",
+    "loads": "libsumo, loads only",
+    "nets": "libsumo, networks only",
     "traci": "env, SUMO (TraCI)",
 }
 
@@ -105,15 +110,18 @@ def recorded_commands(scenarios: list[Path], keep: Path) -> list[list[str]]:
 
 def run_variant(variant: str, episodes: int) -> dict[str, Any]:
     scenarios = sumo_scenarios()
-    if variant == "alone":
+    if variant in ("alone", "loads", "nets"):
         import libsumo
 
         keep = Path(tempfile.mkdtemp(prefix="dh_retention_"))
         cmds = recorded_commands(scenarios, keep)
+        if variant == "nets":
+            cmds = [[c[0], "--net-file", c[c.index("--net-file") + 1], "--no-warnings", "true"] for c in cmds]
+        ticks = TICKS if variant == "alone" else 0
 
         def episode(i: int) -> None:
             libsumo.start(cmds[i % len(cmds)])
-            for _ in range(TICKS):
+            for _ in range(ticks):
                 libsumo.simulationStep()
             libsumo.close()
 
@@ -129,7 +137,7 @@ def run_variant(variant: str, episodes: int) -> dict[str, Any]:
     for i in range(warm_up, warm_up + episodes):
         episode(i)
     end = trimmed_rss()
-    if variant == "alone":
+    if variant in ("alone", "loads", "nets"):
         shutil.rmtree(keep, ignore_errors=True)
     return {
         "variant": variant,
@@ -150,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.variant:
         print(json.dumps(run_variant(a.variant, a.episodes)), flush=True)
         return 0
-    variants = ["none", "shim", "module", "alone"] + (["traci"] if a.traci else [])
+    variants = ["none", "shim", "module", "alone", "loads", "nets"] + (["traci"] if a.traci else [])
     n = len(sumo_scenarios())
     print(f"{a.episodes} episodes over {n} SUMO scenarios, {TICKS} ticks each, after a warm-up pass")
     print(f"{'':28} {'RSS warm':>9} {'RSS end':>9} {'KB/episode':>11} {'growth':>8}")
