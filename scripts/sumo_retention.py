@@ -17,7 +17,8 @@ Each variant runs in a fresh process over the suite's SUMO scenarios (images off
   env, SUMO (TraCI)         SUMO in a subprocess (`--traci`; each start waits ~1 s for SUMO's port)
 
 What libsumo keeps per load shows up in every SUMO variant alike, stepped or not, with our
-routes and options or the bare network; drivehierarchy's own growth is the first. Linux with glibc (reads /proc, calls malloc_trim).
+routes and options or the bare network; drivehierarchy's own growth is the first. Linux with
+glibc (reads /proc, calls malloc_trim).
 """
 
 from __future__ import annotations
