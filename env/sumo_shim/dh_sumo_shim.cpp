@@ -25,6 +25,7 @@ namespace api = libtraci;
 namespace api = libsumo;
 #endif
 
+#include <algorithm>
 #include <cstdint>
 #include <cstring>
 #include <exception>
@@ -32,6 +33,24 @@ namespace api = libsumo;
 #include <memory>
 #include <string>
 #include <vector>
+
+#ifdef DH_LIBTRACI
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+extern char** environ;
+#endif
 
 namespace {
 
@@ -41,6 +60,7 @@ struct Session {
     std::vector<std::string> tls;
     std::vector<std::string> tl_states;
     std::string scratch;                       // returned strings live here until the next call
+    int pid = -1;                              // TraCI: the `sumo` subprocess (ours to reap)
 };
 
 std::string g_error;
@@ -71,6 +91,106 @@ Session& cur() {
 #ifdef DH_LIBTRACI
 const std::vector<int> kVars = {libsumo::VAR_POSITION, libsumo::VAR_ANGLE, libsumo::VAR_SPEED,
                                 libsumo::VAR_SIGNALS};
+
+// We start `sumo` ourselves instead of `libtraci::Simulation::start`: that one connects the
+// moment it has spawned SUMO, which is still loading its network, and on the refused connection
+// prints "Could not connect ... Retrying in 1 second" and sleeps a whole second, on every start.
+// Here the connection is made once SUMO listens. (Polling with libtraci's own connect is not an
+// option: a failed `Connection` deletes whichever connection is active, another session's.)
+
+int free_port() {
+    const int fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    if (fd < 0) {
+        throw std::runtime_error(std::string("socket(): ") + std::strerror(errno));
+    }
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    socklen_t n = sizeof a;
+    const bool ok = bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
+                    getsockname(fd, reinterpret_cast<sockaddr*>(&a), &n) == 0;
+    const int err = errno;
+    close(fd);
+    if (!ok) {
+        throw std::runtime_error(std::string("no free TCP port on 127.0.0.1: ") + std::strerror(err));
+    }
+    return ntohs(a.sin_port);
+}
+
+// Whether a socket of this network namespace listens on `port` (the kernel's table, so that
+// probing never takes SUMO's one client connection).
+bool listening(int port) {
+    for (const char* table : {"/proc/net/tcp", "/proc/net/tcp6"}) {
+        std::ifstream in(table);
+        std::string line;
+        std::getline(in, line);  // header
+        while (std::getline(in, line)) {
+            std::istringstream fields(line);
+            std::string slot, local, remote, state;
+            fields >> slot >> local >> remote >> state;
+            const auto colon = local.rfind(':');
+            if (state == "0A" && colon != std::string::npos &&
+                std::strtol(local.c_str() + colon + 1, nullptr, 16) == port) {
+                return true;
+            }
+        }
+    }
+    return false;
+}
+
+// Waits for the child `pid` up to `grace`; then kills it. Never leaves a zombie.
+void reap(int pid, std::chrono::milliseconds grace) {
+    if (pid <= 0) {
+        return;
+    }
+    const auto until = std::chrono::steady_clock::now() + grace;
+    while (waitpid(pid, nullptr, WNOHANG) == 0) {
+        if (std::chrono::steady_clock::now() >= until) {
+            kill(pid, SIGKILL);
+            waitpid(pid, nullptr, 0);
+            return;
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+}
+
+// Starts `cmd` (the sumo binary and its options) with a TraCI server on a free port, and
+// connects to it as `label` once it listens. `pid` is SUMO's from the moment it runs.
+void start_sumo(std::vector<std::string> cmd, const std::string& label, int& pid) {
+    const int port = free_port();
+    cmd.push_back("--remote-port");
+    cmd.push_back(std::to_string(port));
+    std::vector<char*> argv;
+    for (std::string& arg : cmd) {
+        argv.push_back(arg.data());
+    }
+    argv.push_back(nullptr);
+    pid_t child = -1;
+    const int rc = posix_spawn(&child, argv[0], nullptr, nullptr, argv.data(), environ);
+    if (rc != 0) {
+        throw std::runtime_error("cannot start " + cmd[0] + ": " + std::strerror(rc));
+    }
+    pid = child;
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+    auto pause = std::chrono::microseconds(500);
+    while (!listening(port)) {
+        int status = 0;
+        const pid_t done = waitpid(pid, &status, WNOHANG);
+        if (done == pid || (done < 0 && errno == ECHILD)) {  // ECHILD: someone else reaped it
+            const std::string how = done != pid ? "early"
+                                    : WIFEXITED(status) ? "with status " + std::to_string(WEXITSTATUS(status))
+                                                        : "on signal " + std::to_string(WTERMSIG(status));
+            throw std::runtime_error("SUMO (" + cmd[0] + ") exited " + how + " before it accepted TraCI");
+        }
+        if (std::chrono::steady_clock::now() >= until) {
+            reap(pid, std::chrono::milliseconds(0));
+            throw std::runtime_error("SUMO (" + cmd[0] + ") did not open its TraCI port within 120 s");
+        }
+        std::this_thread::sleep_for(pause);
+        pause = std::min(pause * 2, std::chrono::microseconds(20000));
+    }
+    api::Simulation::init(port, libsumo::DEFAULT_NUM_RETRIES, "localhost", label);
+}
 #endif
 
 }  // namespace
@@ -114,24 +234,44 @@ DH_API int dh_sumo_switch(const char* label) {
     });
 }
 
-// `argv[0]` is the sumo binary, then SUMO's options. libtraci starts it as a subprocess on a
-// free port of 127.0.0.1 and connects as `label`.
+// `argv[0]` is the sumo binary, then SUMO's options. Over TraCI it runs as our subprocess with
+// its server on a free port of 127.0.0.1, connected as `label` (`start_sumo`).
 DH_API int dh_sumo_start(const char* const* argv, int32_t argc, const char* label) {
-    return guarded([&] {
+    int pid = -1;
+    const int rc = guarded([&] {
         std::vector<std::string> cmd(argv, argv + argc);
         g_cur = nullptr;
+#ifdef DH_LIBTRACI
+        auto old = g_sessions.find(label);
+        if (old != g_sessions.end()) {
+            reap(old->second.pid, std::chrono::milliseconds(0));
+        }
+#endif
         g_sessions.erase(label);
 #ifdef DH_LIBTRACI
-        api::Simulation::start(cmd, -1, libsumo::DEFAULT_NUM_RETRIES, label);
+        start_sumo(cmd, label, pid);
 #else
         api::Simulation::start(cmd);
 #endif
         Session& s = g_sessions[label];
+        s.pid = pid;
         g_cur = &s;
         g_label = label;
         s.tls = api::TrafficLight::getIDList();
         s.tl_states.assign(s.tls.size(), std::string());
     });
+#ifdef DH_LIBTRACI
+    // SUMO may open its port and then fail loading its inputs: it ends itself, and its error log
+    // is complete only once it has, so wait for it before the caller reads that log.
+    if (rc != 0 && pid > 0) {
+        reap(pid, std::chrono::milliseconds(5000));
+        auto it = g_sessions.find(label);
+        if (it != g_sessions.end()) {
+            it->second.pid = -1;
+        }
+    }
+#endif
+    return rc;
 }
 
 // Closes the selected session (its SUMO stops).
@@ -149,6 +289,13 @@ DH_API int dh_sumo_close(const char* label) {
         }
 #endif
     });
+#ifdef DH_LIBTRACI
+    // After CMD_CLOSE, SUMO ends its run and exits; a SUMO that no longer answers is killed.
+    auto it = g_sessions.find(label);
+    if (it != g_sessions.end()) {
+        reap(it->second.pid, std::chrono::milliseconds(rc == 0 ? 10000 : 0));
+    }
+#endif
     g_sessions.erase(label);
     g_cur = nullptr;
     g_label.clear();

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -93,6 +94,8 @@ def test_config_overrides_the_scenario_mode(tmp_path: Path, backend: str) -> Non
         env.close()
 
 
+# Over TraCI too: SUMO exits before it listens, which used to cost 60 connect retries of 1 s.
+@pytest.mark.parametrize("backend", ["native", "python", "traci"])
 def test_sumo_start_failure_carries_sumos_message(tmp_path: Path, backend: str) -> None:
     (tmp_path / "bad.add.xml").write_text(
         '<additional><vType id="car" carFollowModel="NoSuchModel"/></additional>', encoding="utf-8"
@@ -278,6 +281,40 @@ def test_every_transport_gives_the_same_traffic() -> None:
         run = run_expert(BENCH, seed=5, steps=60, sumo_backend=other)
         assert native["counts"] == run["counts"], other
         assert native["traffic"] == run["traffic"] and native["trajectory"] == run["trajectory"], other
+
+
+def _sumo_children() -> set[int]:
+    """Pids of this process's child processes named like SUMO, zombies included."""
+    me, kids = os.getpid(), set()
+    for d in Path("/proc").iterdir():
+        try:
+            stat = (d / "stat").read_text() if d.name.isdigit() else ""
+        except OSError:
+            continue
+        if stat:
+            name, rest = stat[stat.index("(") + 1 : stat.rindex(")")], stat[stat.rindex(")") + 2 :].split()
+            if int(rest[1]) == me and "sumo" in name.lower():
+                kids.add(int(d.name))
+    return kids
+
+
+def test_traci_starts_sumo_as_a_child_without_a_retry_and_reaps_it(capfd: pytest.CaptureFixture[str]) -> None:
+    # SUMO is connected to once it listens: no refused connection, no "Retrying in 1 second"
+    # printed on every reset, and each SUMO is waited for when its run closes (no zombie).
+    before = _sumo_children()
+    env = make_env(BENCH, sumo_backend="traci")
+    try:
+        seen = set()
+        for seed in (0, 1):
+            env.reset(seed=seed)
+            env.step(env.expert_action())
+            seen |= _sumo_children() - before
+        assert len(seen) == 2, seen  # one SUMO per reset, each our own child
+    finally:
+        env.close()
+    assert _sumo_children() == before
+    out = capfd.readouterr()
+    assert "Retrying" not in out.out + out.err and "Could not connect" not in out.out + out.err
 
 
 def test_auto_runs_a_second_sumo_env_of_the_process_on_traci() -> None:
