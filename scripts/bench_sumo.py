@@ -17,8 +17,9 @@ vehicles; each measurement runs in a fresh worker process (one SUMO copy per pro
    costs without any traffic);
 4. the native reactive mode on the same scenario (no SUMO).
 
-Printed: ticks/s of each, and per backend the sync overhead = co-sim tick − SUMO step −
-world-alone tick, as a share of SUMO's step time (targets: ≥ 2,000 co-simulated ticks/s with
+Printed: ticks/s of each, each SUMO backend's reset (wall time: SUMO started, warmed up), and
+per backend the sync overhead = co-sim tick − SUMO step − world-alone tick, as a share of SUMO's
+step time (targets: ≥ 2,000 co-simulated ticks/s with
 ~50 vehicles, overhead ≤ 25 %, native ≥ 10,000 ticks/s).
 """
 
@@ -56,10 +57,13 @@ def run_env(scenario: Path, ticks: int, seed: int, traffic: str, backend: str = 
         assert env._sumo is not None and env._sumo.transport == transport, (backend, env._sumo)
     per = env.config.decision_interval_ticks
     spent, done, vehicles, episodes = 0.0, 0, [], 0
+    resets: list[float] = []  # wall time: a TraCI SUMO starts in its own process
     ego_track: list[tuple[float, float, float]] = []
     try:
         while done < ticks:
+            t0 = time.perf_counter()
             env.reset(seed=seed + episodes)
+            resets.append(time.perf_counter() - t0)
             episodes += 1
             while done < ticks:
                 action = env.expert_action()
@@ -81,6 +85,7 @@ def run_env(scenario: Path, ticks: int, seed: int, traffic: str, backend: str = 
         "ticks": done,
         "vehicles": float(np.mean(vehicles)) if vehicles else 0.0,
         "episodes": episodes,
+        "reset_ms": 1e3 * min(resets),
         "ego_track": ego_track,
     }
 
@@ -242,6 +247,10 @@ def main() -> None:
             f"co-sim / SUMO alone {c['tick_us'] / step:.2f}×; {1e6 / c['tick_us']:.0f} co-simulated ticks/s "
             "(target ≥ 2,000 with ~50 vehicles)"
         )
+    print(
+        "reset (SUMO started on the episode's seed, warm-up), wall time, fastest: "
+        + ", ".join(f"{b} {cosims[b]['reset_ms']:.0f} ms" for b in backends)
+    )
     if native is not None:
         print(
             f"native reactive mode ticks/s {1e6 / native['tick_us']:.0f} (target ≥ 10,000 with 50 vehicles)"

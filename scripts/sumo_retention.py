@@ -14,7 +14,7 @@ Each variant runs in a fresh process over the suite's SUMO scenarios (images off
   libsumo, loads only       the same starts, then `close()` at once (no step)
   libsumo, networks only    `sumo --net-file NET` of the same scenarios, then `close()`: no routes,
                             no options of ours
-  env, SUMO (TraCI)         SUMO in a subprocess (`--traci`; each start waits ~1 s for SUMO's port)
+  env, SUMO (TraCI)         SUMO in a subprocess (`--traci`)
 
 What libsumo keeps per load shows up in every SUMO variant alike, stepped or not, with our
 routes and options or the bare network; drivehierarchy's own growth is the first. Linux with
@@ -153,7 +153,7 @@ def run_variant(variant: str, episodes: int) -> dict[str, Any]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--episodes", type=int, default=600, help="episodes after the warm-up (600)")
-    ap.add_argument("--traci", action="store_true", help="also SUMO over TraCI (slow: ~1 s per start)")
+    ap.add_argument("--traci", action="store_true", help="also SUMO over TraCI (SUMO as a subprocess)")
     ap.add_argument("--variant", choices=sorted(VARIANTS), help=argparse.SUPPRESS)  # one child's run
     a = ap.parse_args(argv)
     if a.variant:

@@ -271,7 +271,7 @@ class PlayerCache:
 
     def release_worlds(self) -> None:
         """Closes the live worlds of players no thread is using: a new buffer then gets the
-        process's in-process SUMO (starting another as a TraCI subprocess costs a second)."""
+        process's in-process SUMO (another, as a TraCI subprocess, is slower to start and step)."""
         with self._lock:
             players = list(self._players.values())
         self._release_worlds(players)
