@@ -94,7 +94,8 @@ def test_config_overrides_the_scenario_mode(tmp_path: Path, backend: str) -> Non
         env.close()
 
 
-# Over TraCI too: SUMO exits before it listens, which used to cost 60 connect retries of 1 s.
+# Over TraCI too, where SUMO may open its port and then fail loading its inputs: the message
+# must still carry SUMO's own error log (the shim waits for SUMO to exit before it is read).
 @pytest.mark.parametrize("backend", ["native", "python", "traci"])
 def test_sumo_start_failure_carries_sumos_message(tmp_path: Path, backend: str) -> None:
     (tmp_path / "bad.add.xml").write_text(
