@@ -264,7 +264,7 @@ DH_API int dh_sumo_start(const char* const* argv, int32_t argc, const char* labe
     // SUMO may open its port and then fail loading its inputs: it ends itself, and its error log
     // is complete only once it has, so wait for it before the caller reads that log.
     if (rc != 0 && pid > 0) {
-        reap(pid, std::chrono::milliseconds(5000));
+        reap(pid, std::chrono::milliseconds(30000));  // a guard: SUMO exits at once
         auto it = g_sessions.find(label);
         if (it != g_sessions.end()) {
             it->second.pid = -1;
