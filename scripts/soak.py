@@ -2,12 +2,13 @@
 
     python scripts/soak.py --episodes 10000 --out runs/soak
 
-Mixes the SUMO scenarios of the suite (both SUMO backends), the expert and every bad driver of
-`drivehierarchy.testing.bad_agents`, driven in this process; and a share (`--vlm-share`, 10 %)
-through `r4 evaluate` with the VLM agent (`--jobs 4`) against the loopback scripted server, which
-answers 20 % of requests badly (prose, empty, non-numbers, out of range, JSON), chosen by a hash
-of the request so a repeat gets the same replies. Every task recurs, so repeats of the same
-(scenario, seed, agent) are compared.
+Mixes the SUMO scenarios of the suite on the SUMO transports of `--backends` (by default libsumo
+in this process, through the shim and through the Python module; `traci` runs SUMO as a
+subprocess), the expert and every bad driver of `drivehierarchy.testing.bad_agents`, driven in
+this process; and a share (`--vlm-share`, 10 %) through `r4 evaluate` with the VLM agent
+(`--jobs 4`) against the loopback scripted server, which answers 20 % of requests badly (prose,
+empty, non-numbers, out of range, JSON), chosen by a hash of the request so a repeat gets the
+same replies. Every task recurs, so repeats of the same (scenario, seed, agent) are compared.
 
 Reports (and writes OUT/soak.json): RSS after the warm-up round and at the end (growth %; each
 also after glibc's malloc_trim, which a leak survives and allocator retention does not), the
@@ -132,8 +133,9 @@ def resources(trim: bool = False) -> dict[str, Any]:
 
 
 class Soak:
-    def __init__(self, out: Path, jobs: int, log: Any) -> None:
+    def __init__(self, out: Path, jobs: int, backends: tuple[str, ...], log: Any) -> None:
         self.out = out
+        self.backends = list(backends)
         self.jobs = jobs
         self.log = log
         self.first: dict[tuple[str, ...], str] = {}  # task → sha256 of its first record
@@ -221,8 +223,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--round", type=int, default=200, help="episodes per round (the first warms up)")
     ap.add_argument("--jobs", type=int, default=4, help="`r4 evaluate --jobs` (4)")
     ap.add_argument("--distinct", type=int, default=300, help="distinct in-process tasks, cycled (300)")
+    ap.add_argument(
+        "--backends",
+        default="native,python",
+        help="SUMO transports of the in-process episodes, comma-separated (native,python; also traci)",
+    )
     ap.add_argument("--out", type=Path, default=Path("runs/soak"))
     a = ap.parse_args(argv)
+    backends = tuple(b.strip() for b in a.backends.split(",") if b.strip())
+    for b in backends:
+        if b not in ("native", "python", "traci"):
+            ap.error(f"--backends: {b!r} is not one of native, python, traci")
+    if not backends:
+        ap.error("--backends: name at least one of native, python, traci")
     a.out.mkdir(parents=True, exist_ok=True)
     log_file = (a.out / "soak.log").open("a", encoding="utf-8")
 
@@ -233,7 +246,7 @@ def main(argv: list[str] | None = None) -> int:
         log_file.flush()
 
     sumo = [p for p in builtin_scenarios() if runs_sumo(p)]
-    direct_tasks = [(p, agent, b) for p in sumo for agent in AGENTS for b in ("native", "python")]
+    direct_tasks = [(p, agent, b) for p in sumo for agent in AGENTS for b in backends]
     # Spread the agents over the scenarios so every round mixes them.
     direct_tasks.sort(key=lambda t: hashlib.sha256(f"{scenario_id(t[0])} {t[1]} {t[2]}".encode()).hexdigest())
     # A subset, cycled, so that every task recurs and its repeats are compared.
@@ -243,7 +256,7 @@ def main(argv: list[str] | None = None) -> int:
     vlm_per_round = max(1, round(a.round * a.vlm_share))
     direct_per_round = a.round - vlm_per_round
 
-    soak = Soak(a.out, a.jobs, log)
+    soak = Soak(a.out, a.jobs, backends, log)
     # The server runs in its own process: its request bookkeeping is not the harness's memory.
     ctx = mp.get_context("spawn")
     urls: Any = ctx.Queue()
@@ -315,6 +328,7 @@ def write_report(
     report = {
         "finished": finished,
         "episodes": soak.episodes,
+        "backends": soak.backends,
         "wall_s": round(time.perf_counter() - t0, 1),
         "warm": warm,
         "end": end,
