@@ -40,6 +40,7 @@ from drivehierarchy.benchmark.r4 import runner
 from drivehierarchy.scenarios import builtin_scenarios, scenario_id
 from drivehierarchy.testing.bad_agents import KINDS, comparable_record, fuzz_episode
 from drivehierarchy.testing.openai_server import ChatRequest, ScriptedOpenAIServer, route_driver
+from drivehierarchy.testing.procs import descendants
 
 AGENTS = ("expert", *KINDS)
 BAD_REPLIES = (
@@ -78,32 +79,6 @@ def rss_mb() -> float:
         if line.startswith("VmRSS:"):
             return int(line.split()[1]) / 1024.0
     raise RuntimeError("no VmRSS in /proc/self/status")
-
-
-def descendants() -> list[tuple[int, str]]:
-    """(pid, name) of every live process descending from this one."""
-    parent: dict[int, int] = {}
-    names: dict[int, str] = {}
-    for d in Path("/proc").iterdir():
-        if not d.name.isdigit():
-            continue
-        try:
-            stat = (d / "stat").read_text()
-        except OSError:
-            continue
-        name = stat[stat.index("(") + 1 : stat.rindex(")")]
-        fields = stat[stat.rindex(")") + 2 :].split()
-        if fields[0] == "Z":
-            continue  # a zombie holds nothing but its exit status
-        parent[int(d.name)], names[int(d.name)] = int(fields[1]), name
-    me, out = os.getpid(), []
-    for pid in parent:
-        p = pid
-        while p in parent and p != me:
-            p = parent[p]
-        if p == me and pid != me:
-            out.append((pid, names[pid]))
-    return sorted(out)
 
 
 # The soak's own helper processes (its server, multiprocessing's resource tracker): not leaks.

@@ -25,6 +25,7 @@ from drivehierarchy import _core
 from drivehierarchy._core import ConfigError, ScenarioError, SimulationError
 from drivehierarchy.envs.traffic import native
 from drivehierarchy.scenarios import sumo_home
+from drivehierarchy.testing.procs import process_table
 
 FLOW_SCENARIO = "06_traffic_flow/ingolstadt_06_westbound_flow"
 
@@ -286,17 +287,8 @@ def test_every_transport_gives_the_same_traffic() -> None:
 
 def _sumo_children() -> set[int]:
     """Pids of this process's child processes named like SUMO, zombies included."""
-    me, kids = os.getpid(), set()
-    for d in Path("/proc").iterdir():
-        try:
-            stat = (d / "stat").read_text() if d.name.isdigit() else ""
-        except OSError:
-            continue
-        if stat:
-            name, rest = stat[stat.index("(") + 1 : stat.rindex(")")], stat[stat.rindex(")") + 2 :].split()
-            if int(rest[1]) == me and "sumo" in name.lower():
-                kids.add(int(d.name))
-    return kids
+    me = os.getpid()
+    return {pid for pid, (ppid, name, _) in process_table().items() if ppid == me and "sumo" in name.lower()}
 
 
 def test_traci_starts_sumo_as_a_child_without_a_retry_and_reaps_it(capfd: pytest.CaptureFixture[str]) -> None:
