@@ -392,6 +392,49 @@ impl Polyline {
         k.saturating_sub(1).min(n - 2)
     }
 
+    /// [`Polyline::project`] onto the polyline extended past its ends: when the closest point
+    /// is the first vertex with `p` before it (or the last vertex with `p` beyond it), `s`
+    /// continues along that end segment (< 0 or > length) and `lateral`, `distance` and `point`
+    /// refer to the segment's line. A point just before a lane's start is thus not counted as
+    /// off to its side.
+    pub fn project_extended(&self, p: Vec2) -> Option<Projection> {
+        let pr = self.project(p)?;
+        let n = self.pts.len();
+        if n < 2 {
+            return Some(pr);
+        }
+        let i = pr.segment;
+        let (a, b) = (self.pts[i], self.pts[i + 1]);
+        let ab = b - a;
+        let u = (p - a).dot(ab) / ab.norm_sq();
+        if !((i == 0 && u < 0.0) || (i == n - 2 && u > 1.0)) {
+            return Some(pr);
+        }
+        let lateral = ab.cross(p - a) / ab.norm();
+        Some(Projection {
+            s: self.cum[i] + u * (self.cum[i + 1] - self.cum[i]),
+            distance: lateral.abs(),
+            lateral,
+            segment: i,
+            point: a + ab * u,
+        })
+    }
+
+    /// Pose at arc length `s` on the polyline extended past its ends (along the first segment
+    /// for `s` < 0, the last for `s` > length), heading of that segment.
+    pub fn pose_extended(&self, s: f64) -> Pose {
+        match self.pts.len() {
+            0 => Pose::new(Vec2::ZERO, 0.0),
+            1 => Pose::new(self.pts[0], 0.0),
+            _ => {
+                let i = self.segment_at(s.clamp(0.0, self.length()));
+                let (a, b) = (self.pts[i], self.pts[i + 1]);
+                let dir = (b - a) / (self.cum[i + 1] - self.cum[i]);
+                Pose::new(a + dir * (s - self.cum[i]), dir.angle())
+            }
+        }
+    }
+
     /// The point at arc length `s`, clamped to [0, length].
     pub fn point_at(&self, s: f64) -> Vec2 {
         match self.pts.len() {
@@ -465,6 +508,25 @@ impl Obb {
     pub fn aabb(&self) -> Aabb {
         Aabb::from_points(&self.corners())
     }
+    /// Whether two rectangles overlap, touching included (separating-axis test).
+    pub fn overlaps(&self, o: &Obb) -> bool {
+        let (ca, cb) = (self.corners(), o.corners());
+        for axis in
+            [self.pose.forward(), self.pose.forward().perp(), o.pose.forward(), o.pose.forward().perp()]
+        {
+            let span = |cs: &[Vec2; 4]| {
+                cs.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), c| {
+                    let d = c.dot(axis);
+                    (lo.min(d), hi.max(d))
+                })
+            };
+            let ((a0, a1), (b0, b1)) = (span(&ca), span(&cb));
+            if a1 < b0 || b1 < a0 {
+                return false;
+            }
+        }
+        true
+    }
 }
 
 #[cfg(test)]
@@ -485,6 +547,49 @@ mod tests {
         let p = pl.project(Vec2::new(12.0, 5.0)).unwrap();
         assert_eq!(p.s, 15.0);
         assert_eq!(p.lateral, -2.0);
+    }
+
+    #[test]
+    fn extended_projection_continues_past_the_ends() {
+        let pl = l_shape();
+        // Inside: the same as `project`.
+        assert_eq!(pl.project_extended(Vec2::new(4.0, 2.0)), pl.project(Vec2::new(4.0, 2.0)));
+        // Before the start: s < 0 and the offset is measured square to the first segment,
+        // where `project` reports the distance to the start point.
+        let p = pl.project_extended(Vec2::new(-3.0, 4.0)).unwrap();
+        assert_eq!((p.s, p.lateral, p.distance, p.point), (-3.0, 4.0, 4.0, Vec2::new(-3.0, 0.0)));
+        assert_eq!(pl.project(Vec2::new(-3.0, 4.0)).unwrap().lateral, 5.0);
+        // Beyond the end, right of the northbound leg.
+        let p = pl.project_extended(Vec2::new(11.0, 12.0)).unwrap();
+        assert_eq!((p.s, p.lateral, p.segment), (22.0, -1.0, 1));
+        // An outer corner vertex is not an end: no extrapolation.
+        let p = pl.project_extended(Vec2::new(12.0, -2.0)).unwrap();
+        assert_eq!((p.s, p.point), (10.0, Vec2::new(10.0, 0.0)));
+        assert!((p.distance - 8.0f64.sqrt()).abs() < 1e-12);
+        assert_eq!(Polyline::new(vec![]).project_extended(Vec2::ZERO), None);
+    }
+
+    #[test]
+    fn extended_pose_and_box_overlap() {
+        let pl = l_shape();
+        assert_eq!(pl.pose_extended(4.0), Pose::new(Vec2::new(4.0, 0.0), 0.0));
+        assert_eq!(pl.pose_extended(-2.0), Pose::new(Vec2::new(-2.0, 0.0), 0.0));
+        let p = pl.pose_extended(23.0);
+        assert!(p.pos.dist(Vec2::new(10.0, 13.0)) < 1e-12);
+        assert!((p.yaw - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+        let b = |x: f64, y: f64, yaw: f64| Obb {
+            pose: Pose::new(Vec2::new(x, y), yaw),
+            half_length: 2.0,
+            half_width: 1.0,
+        };
+        assert!(b(0.0, 0.0, 0.0).overlaps(&b(3.9, 0.0, 0.0)));
+        assert!(b(0.0, 0.0, 0.0).overlaps(&b(4.0, 0.0, 0.0)), "touching counts");
+        assert!(!b(0.0, 0.0, 0.0).overlaps(&b(4.1, 0.0, 0.0)));
+        // Axis-aligned boxes of the two would overlap; the rotated ones do not.
+        let q = std::f64::consts::FRAC_PI_4;
+        assert!(b(0.0, 0.0, q).aabb().intersects(&b(2.4, -2.4, q).aabb()));
+        assert!(!b(0.0, 0.0, q).overlaps(&b(2.4, -2.4, q)));
+        assert!(b(0.0, 0.0, q).overlaps(&b(0.9, -0.9, q)));
     }
 
     #[test]

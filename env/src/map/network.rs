@@ -10,7 +10,7 @@
 use super::drivable::DrivableIndex;
 use super::model::*;
 use super::parse::{self, line_of, RawNet};
-use crate::geom::{Aabb, Pose};
+use crate::geom::{Aabb, Pose, Projection, Vec2};
 use crate::{Error, Result};
 use std::collections::{HashMap, HashSet};
 use std::path::Path;
@@ -329,6 +329,36 @@ impl Network {
     pub fn lane_position(&self, lane: LaneIdx, s: f64) -> Pose {
         let sh = &self.lanes[lane].shape;
         Pose::new(sh.point_at(s), sh.heading_at(s))
+    }
+    /// Normal edges reached from normal edge `e` by a connection (for any class), sorted by
+    /// index; empty for other edges.
+    pub fn successors(&self, e: EdgeIdx) -> impl Iterator<Item = EdgeIdx> + '_ {
+        self.succ.get(e).into_iter().flatten().map(|&(to, _, _)| to)
+    }
+    /// The lane whose centreline passes nearest to `p` within `max_dist` (metres), with the
+    /// projection on it: only lanes allowing `class` when given, junction-internal lanes only
+    /// when `internal`. Ties go to the lane listed first in the file.
+    pub fn nearest_lane(
+        &self,
+        p: Vec2,
+        max_dist: f64,
+        class: Option<VClass>,
+        internal: bool,
+    ) -> Option<(LaneIdx, Projection)> {
+        let mut best: Option<(LaneIdx, Projection)> = None;
+        for (i, lane) in self.lanes.iter().enumerate() {
+            if class.is_some_and(|c| !lane.allow.contains(c))
+                || (!internal && self.edges[lane.edge].function == EdgeFunction::Internal)
+            {
+                continue;
+            }
+            if let Some(pr) = lane.shape.project(p) {
+                if pr.distance <= max_dist && best.is_none_or(|(_, b)| pr.distance < b.distance) {
+                    best = Some((i, pr));
+                }
+            }
+        }
+        best
     }
     /// Ids of every traffic light that controls at least one connection, sorted.
     pub fn tl_ids(&self) -> Vec<&str> {

@@ -268,7 +268,7 @@ impl IdmTraffic {
                 half_width: 0.5 * vt.width_m + 0.3,
             };
             let overlaps = |c: Vec2, yaw: f64, l: f64, w: f64| {
-                obb_overlap(&me, &Obb { pose: Pose::new(c, yaw), half_length: 0.5 * l, half_width: 0.5 * w })
+                me.overlaps(&Obb { pose: Pose::new(c, yaw), half_length: 0.5 * l, half_width: 0.5 * w })
             };
             let blocked = pose.pos.dist(ego.0.pos) < clear + 2.5
                 || overlaps(ego.0.pos, ego.0.yaw, ego.1, ego.2)
@@ -472,24 +472,6 @@ impl IdmTraffic {
             });
         }
     }
-}
-
-/// Whether two oriented rectangles overlap (separating-axis test).
-fn obb_overlap(a: &Obb, b: &Obb) -> bool {
-    let (ca, cb) = (a.corners(), b.corners());
-    for axis in [a.pose.forward(), a.pose.forward().perp(), b.pose.forward(), b.pose.forward().perp()] {
-        let span = |cs: &[Vec2; 4]| {
-            cs.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), c| {
-                let d = c.dot(axis);
-                (lo.min(d), hi.max(d))
-            })
-        };
-        let ((a0, a1), (b0, b1)) = (span(&ca), span(&cb));
-        if a1 < b0 || b1 < a0 {
-            return false;
-        }
-    }
-    true
 }
 
 fn desired_speed(max_speed: f64, factor: f64, lane_speed: f64) -> f64 {

@@ -208,6 +208,30 @@ fn routing_and_route_lanes() {
 }
 
 #[test]
+fn successors_and_nearest_lane_by_class() {
+    let n = net();
+    let e = |id: &str| n.edge_by_id(id).unwrap();
+    let l = |id: &str| n.lane_by_id(id).unwrap();
+    assert_eq!(n.successors(e("A")).collect::<Vec<_>>(), vec![e("B"), e("C")]);
+    assert_eq!(n.successors(e("B")).count(), 0);
+    assert_eq!(n.successors(e(":J1_0")).count(), 0, "internal edges have none");
+    assert_eq!(n.successors(999).count(), 0);
+    // Nearest lane: any class, then only those allowing it; internal lanes on request.
+    let p = Vec2::new(45.0, 10.0);
+    let (lane, pr) = n.nearest_lane(p, 20.0, None, false).unwrap();
+    assert_eq!(lane, l("P_0"));
+    assert!((pr.s - 155.0).abs() < 1e-9 && (pr.distance - 10.0).abs() < 1e-9, "{pr:?}");
+    let (lane, pr) = n.nearest_lane(p, 20.0, Some(VClass::Passenger), false).unwrap();
+    assert_eq!(lane, l("A_1"));
+    assert!((pr.distance - 11.6).abs() < 1e-9 && pr.lateral > 0.0);
+    assert_eq!(n.nearest_lane(p, 20.0, Some(VClass::Truck), false).unwrap().0, l("A_0"));
+    assert!(n.nearest_lane(p, 5.0, Some(VClass::Passenger), false).is_none());
+    let on_internal = Vec2::new(100.0, -1.0);
+    assert_eq!(n.nearest_lane(on_internal, 20.0, None, true).unwrap().0, l(":J1_0_0"));
+    assert_ne!(n.nearest_lane(on_internal, 20.0, None, false).unwrap().0, l(":J1_0_0"));
+}
+
+#[test]
 fn drivable_index() {
     let n = net();
     let d = n.drivable();
