@@ -1,7 +1,7 @@
 """Hand-written contract of the Rust extension module (checked by `mypy.stubtest`)."""
 
 from os import PathLike
-from typing import Any, Final, final
+from typing import Any, Final, TypedDict, final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -124,6 +124,73 @@ def snap_to_lane(
     sumo_home: str | PathLike[str] | None = None,
 ) -> tuple[str, float, float] | None: ...
 def scenario_geometry(path: str, text: str, sumo_home: str | PathLike[str] | None = None) -> str: ...
+
+# A road network as the world reads it (python/src/network.rs): lanes, snapping, projection,
+# poses along lanes and footprint overlap, for tools such as the official-scene importer.
+class _Edge(TypedDict):
+    id: str
+    function: str
+    lanes: list[str]
+    successors: list[str]
+
+class _Lane(TypedDict):
+    id: str
+    edge: str
+    function: str
+    index: int
+    width_m: float
+    length_m: float
+    shape_length_m: float
+    speed_mps: float
+    allow: list[str]
+    shape: list[tuple[float, float]]
+
+@final
+class Network:
+    """A SUMO road network (`.net.xml` or `.net.xml.gz`)."""
+
+    @staticmethod
+    def load(path: str | PathLike[str]) -> Network: ...
+    @property
+    def path(self) -> str: ...
+    @property
+    def offset(self) -> tuple[float, float]: ...
+    @property
+    def proj_parameter(self) -> str: ...
+    def edge(self, id: str) -> _Edge | None: ...
+    def lane(self, id: str) -> _Lane | None: ...
+    def lanes(
+        self, edge: str | None = None, vclass: str | None = None, internal: bool = False
+    ) -> list[_Lane]: ...
+    def project(self, lane: str, x: float, y: float) -> tuple[float, float]: ...
+    def position(self, lane: str, s: float, offset: float = 0.0) -> tuple[float, float, float]: ...
+    def lane_box(self, lane: str, s: float, offset: float, length: float, width: float) -> OrientedBox: ...
+    def snap(
+        self,
+        x: float,
+        y: float,
+        max_dist_m: float = 10.0,
+        vclass: str | None = None,
+        internal: bool = False,
+    ) -> tuple[str, float, float] | None: ...
+
+@final
+class OrientedBox:
+    """A rectangle on the ground: centre, heading (radians from east), length, width."""
+
+    def __new__(cls, x: float, y: float, heading: float, length: float, width: float) -> OrientedBox: ...
+    @property
+    def x(self) -> float: ...
+    @property
+    def y(self) -> float: ...
+    @property
+    def heading(self) -> float: ...
+    @property
+    def length(self) -> float: ...
+    @property
+    def width(self) -> float: ...
+    def corners(self) -> list[tuple[float, float]]: ...
+    def overlaps(self, other: OrientedBox) -> bool: ...
 
 # Open-loop R1–R3 scoring
 def openloop_tasks() -> list[dict[str, Any]]: ...
