@@ -16,6 +16,9 @@ off_x, CARLA y = off_y − SUMO y), so a network rebuilt with another offset sti
 
 Nothing is dropped silently: an actor that cannot be represented is listed in the scene's
 report with the reason.
+
+The network, and all geometry on it (projection onto lanes, poses along them, footprint
+overlap), is the simulator's own (`_core.Network`); the files are written with tomlkit.
 """
 
 from __future__ import annotations
@@ -29,9 +32,16 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from itertools import pairwise
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from drivehierarchy._core import ConfigError, ScenarioError
+import tomlkit
+from tomlkit.items import InlineTable, Table
+from tomlkit.toml_document import TOMLDocument
+
+from drivehierarchy._core import ConfigError, Network, OrientedBox, ScenarioError
+
+if TYPE_CHECKING:
+    from drivehierarchy._core import _Edge, _Lane
 
 # The original tongji network's offset (PROTOCOL.md §2.6), used when a file gives none.
 DEFAULT_NET_OFFSET = (761.28, 488.05)
@@ -201,140 +211,73 @@ class ImportReport:
 
 
 # --------------------------------------------------------------------------------------------
-# Geometry on the user's network (sumolib)
+# The user's network and the TOML output
 
 
-def project_on_polyline(
-    shape: Sequence[tuple[float, float]], x: float, y: float
-) -> tuple[float, float, float]:
-    """(arc length s, signed lateral offset > 0 = left, heading deg) of the point on the nearest
-    segment. Past the polyline's ends s is extrapolated (< 0 or > length) and the offset stays
-    perpendicular to the end segment, so a point before a lane's start is not counted as off
-    to its side."""
-    best = (math.inf, 0.0, 0.0, 0.0)
-    acc = 0.0
-    n = len(shape) - 1
-    for i, ((x0, y0), (x1, y1)) in enumerate(pairwise(shape)):
-        dx, dy = x1 - x0, y1 - y0
-        seg = math.hypot(dx, dy)
-        if seg == 0.0:
-            continue
-        u = ((x - x0) * dx + (y - y0) * dy) / (seg * seg)
-        t = max(0.0, min(1.0, u))
-        d = math.hypot(x - (x0 + t * dx), y - (y0 + t * dy))
-        if d < best[0]:
-            # Extrapolate along the first / last segment only.
-            te = u if (i == 0 and u < 0) or (i == n - 1 and u > 1) else t
-            lateral = (dx * (y - y0) - dy * (x - x0)) / seg
-            best = (d, acc + te * seg, lateral, math.degrees(math.atan2(dy, dx)))
-        acc += seg
-    if math.isinf(best[0]):
-        raise ValueError("degenerate lane shape")
-    return best[1], best[2], best[3]
+def _normal_edge(net: Network, edge_id: str) -> _Edge | None:
+    """The edge `edge_id` if it is one a route can list (not inside a junction), else None."""
+    edge = net.edge(edge_id)
+    return edge if edge is not None and edge["function"] in ("normal", "connector") else None
 
 
-def _lane_box(lane: Any, s: float, offset: float, length: float, width: float) -> list[tuple[float, float]]:
-    """Corners of a `length` × `width` box centred at arc length `s` (extrapolated past the lane's
-    ends) and lateral `offset` of `lane`, aligned with the lane there."""
-    shape = lane.getShape()
-    total = sum(math.dist(p, q) for p, q in pairwise(shape))
-    sc = min(max(s, 0.0), total)
-    acc = 0.0
-    for (x0, y0), (x1, y1) in pairwise(shape):
-        seg = math.hypot(x1 - x0, y1 - y0)
-        if seg > 0 and (acc + seg >= sc or (x1, y1) == tuple(shape[-1])):
-            ux, uy = (x1 - x0) / seg, (y1 - y0) / seg
-            t = sc - acc + (s - sc)
-            cx, cy = x0 + ux * t - uy * offset, y0 + uy * t + ux * offset
-            break
-        acc += seg
-    else:
-        raise ValueError(f"lane {lane.getID()}: degenerate shape")
-    hl, hw = length / 2, width / 2
-    return [
-        (cx + ux * a - uy * b, cy + uy * a + ux * b) for a, b in ((hl, hw), (-hl, hw), (-hl, -hw), (hl, -hw))
-    ]
+def _open_lanes(net: Network, edge_id: str, vclass: str) -> list[_Lane]:
+    """Lanes of `edge_id` open to `vclass` (a vehicle class SUMO does not know is unmappable)."""
+    try:
+        return net.lanes(edge=edge_id, vclass=vclass)
+    except ConfigError as exc:
+        raise _Unmappable(f"vehicle class {vclass!r} is not a SUMO vehicle class") from exc
 
 
-def boxes_overlap(a: Sequence[tuple[float, float]], b: Sequence[tuple[float, float]]) -> bool:
-    """Whether two convex polygons intersect (separating-axis test)."""
-    for poly in (a, b):
-        for (x0, y0), (x1, y1) in zip(poly, [*poly[1:], poly[0]], strict=True):
-            nx, ny = y0 - y1, x1 - x0
-            pa = [nx * x + ny * y for x, y in a]
-            pb = [nx * x + ny * y for x, y in b]
-            if max(pa) < min(pb) or max(pb) < min(pa):
-                return False
-    return True
-
-
-class _Net:
-    """The user's road network, read once with sumolib."""
-
-    def __init__(self, path: Path) -> None:
-        import sumolib
-
-        try:
-            self.net = sumolib.net.readNet(str(path), withInternal=False)
-        except Exception as exc:
-            raise ScenarioError(f"{path}: cannot read the SUMO network: {exc}") from exc
-        self.path = path
-        self.offset = tuple(float(v) for v in self.net.getLocationOffset())
-
-    def edge(self, edge_id: str) -> Any | None:
-        return self.net.getEdge(edge_id) if self.net.hasEdge(edge_id) else None
-
-    def lane_shape_len(self, lane: Any) -> float:
-        shape = lane.getShape()
-        return sum(math.dist(a, b) for a, b in pairwise(shape))
-
-
-def _vclass_lanes(edge: Any, vclass: str) -> list[Any]:
-    return [ln for ln in edge.getLanes() if ln.allows(vclass)]
-
-
-# --------------------------------------------------------------------------------------------
-# TOML output (a fixed, small structure: scalars, arrays and inline tables)
-
-_BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
-
-
-def _toml_key(k: str) -> str:
-    return k if _BARE_KEY.match(k) else json.dumps(k, ensure_ascii=False)
-
-
-def _toml_value(v: Any) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int):
-        return str(v)
+def _rounded(v: Any) -> Any:
+    """`v` with every float rounded to 0.1 mm (no sub-millimetre noise from the projections in
+    the files; no negative zero)."""
+    if isinstance(v, int):  # bool too
+        return v
     if isinstance(v, float):
         if not math.isfinite(v):
             raise ValueError(f"non-finite number {v}")
         r = round(v, 4)
-        return repr(r + 0.0) if r != 0 else "0.0"
-    if isinstance(v, str):
-        # JSON string escapes are a subset of TOML basic-string escapes.
-        return json.dumps(v, ensure_ascii=False)
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+        return r + 0.0 if r != 0 else 0.0
     if isinstance(v, dict):
-        return "{ " + ", ".join(f"{_toml_key(k)} = {_toml_value(x)}" for k, x in v.items()) + " }"
-    raise TypeError(f"cannot write {type(v).__name__} to TOML")
+        return {k: _rounded(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_rounded(x) for x in v]
+    return v
 
 
-def _toml_table(header: str | None, items: dict[str, Any]) -> list[str]:
-    out = [header] if header else []
-    for k, v in items.items():
-        if v is None:
-            continue
-        if isinstance(v, list) and v and all(isinstance(x, dict) for x in v) and len(v) > 1:
-            out.append(f"{_toml_key(k)} = [")
-            out.extend(f"  {_toml_value(x)}," for x in v)
-            out.append("]")
+def _inline(d: dict[str, Any]) -> InlineTable:
+    """An inline table in the style of the shipped scenarios: `{ lane = "a", s = 1.0 }`."""
+    t = tomlkit.inline_table()
+    t.append(None, tomlkit.ws(" "))
+    for k, v in d.items():
+        t.append(k, _item(v))
+    t.append(None, tomlkit.ws(" "))
+    return t
+
+
+def _item(v: Any) -> Any:
+    if isinstance(v, dict):
+        return _inline(v)
+    if isinstance(v, list):
+        arr = tomlkit.array()
+        if len(v) > 1 and all(isinstance(x, dict) for x in v):
+            # One table per line, indented by two spaces as in the shipped scenarios.
+            for x in v:
+                arr.add_line(_inline(x), indent="  ")
+            arr.add_line(indent="")
         else:
-            out.append(f"{_toml_key(k)} = {_toml_value(v)}")
-    return out
+            arr.extend(_item(x) for x in v)
+        return arr
+    return v
+
+
+def _table(items: dict[str, Any], into: Table | TOMLDocument | None = None) -> Any:
+    """`items` (keys whose value is None left out) as a TOML table."""
+    t = tomlkit.table() if into is None else into
+    for k, v in _rounded(items).items():
+        if v is not None:
+            t.add(k, _item(v))
+    return t
 
 
 # --------------------------------------------------------------------------------------------
@@ -383,7 +326,8 @@ class OfficialImporter:
         if not self.net_path.is_file():
             raise ConfigError(f"--net {net}: file not found")
         self.out = Path(out)
-        self.net = _Net(self.net_path)
+        # A file that cannot be read or parsed raises ScenarioError naming it and what is wrong.
+        self.net = Network.load(self.net_path)
         self.validate = validate
         self.copy_net = copy_net
         if vtypes is None:
@@ -518,7 +462,7 @@ class OfficialImporter:
         rep.actors_in_file = 1 + len(others)
         editor_parts = _editor_participants(editor, rep)
 
-        self._ego_box: list[tuple[float, float]] | None = None
+        self._ego_box: OrientedBox | None = None
         ego = self._ego(hero, rep, where, editor_parts.get(str(hero.get("actor_id"))))
         rep.ego = True
         actors: list[dict[str, Any]] = []
@@ -604,28 +548,35 @@ class OfficialImporter:
         if data.get("weather"):
             rep.notes.append("weather not imported (our renderer has one lighting)")
 
-        lines = [
-            "# Imported from the original DriveHierarchy release by",
-            "# `drivehierarchy scenario import-official`.",
-            f"# Source: {rep.source}",
-        ]
-        lines += _toml_table(None, top)
+        doc = tomlkit.document()
+        doc.add(tomlkit.comment("Imported from the original DriveHierarchy release by"))
+        doc.add(tomlkit.comment("`drivehierarchy scenario import-official`."))
+        doc.add(tomlkit.comment(f"Source: {rep.source}"))
+        _table(top, into=doc)
         ego_vehicle = ego.pop("vehicle", None)
-        lines += ["", *_toml_table("[ego]", ego)]
+        doc.add(tomlkit.nl())
+        ego_table = doc.setdefault("ego", _table(ego))
         if ego_vehicle:
-            lines += ["", *_toml_table("[ego.vehicle]", ego_vehicle)]
-        for a in actors:
-            lines += ["", *_toml_table("[[actors]]", a)]
+            ego_table.add(tomlkit.nl())
+            ego_table.add("vehicle", _table(ego_vehicle))
+        if actors:
+            doc.add(tomlkit.nl())
+            doc.add("actors", tomlkit.aot())
+            for a in actors:
+                doc["actors"].append(_table(a))
         if vehicles:
             traffic = {
                 "mode": "sumo",
                 "vtypes": "@VTYPES@" if self.vtypes is not None else None,
                 "warmup_s": 0.0,
             }
-            lines += ["", *_toml_table("[traffic]", traffic)]
+            doc.add(tomlkit.nl())
+            traffic_table = doc.setdefault("traffic", _table(traffic))
+            traffic_table.add(tomlkit.nl())
+            traffic_table.add("vehicles", tomlkit.aot())
             for v in vehicles:
-                lines += ["", *_toml_table("[[traffic.vehicles]]", v)]
-        return "\n".join(lines) + "\n"
+                traffic_table["vehicles"].append(_table(v))
+        return tomlkit.dumps(doc)
 
     # -- points -----------------------------------------------------------------------------
 
@@ -652,38 +603,55 @@ class OfficialImporter:
             ] + self.net.offset[1]
         lon, lat = _f(p.get("longitude")), _f(p.get("latitude"))
         if lon is not None and lat is not None:
-            try:
-                x, y = self.net.net.convertLonLat2XY(lon, lat)
-                return float(x), float(y)
-            except Exception as exc:  # the network has no projection
-                raise _Unmappable(
-                    f"{what}: only longitude/latitude given and the network cannot project them ({exc})"
-                ) from exc
+            return self._lon_lat(lon, lat, what)
         raise _Unmappable(f"{what}: no coordinates (carla_x/y, sumo_x/y or longitude/latitude)")
+
+    def _lon_lat(self, lon: float, lat: float, what: str) -> tuple[float, float]:
+        """A longitude / latitude in the network frame: the network's PROJ projection plus its
+        offset, as SUMO converts them."""
+        if self.net.proj_parameter.strip() in ("", "!"):
+            raise _Unmappable(
+                f"{what}: only longitude/latitude given and the network {self.net_path.name} has no "
+                "geo-projection (projParameter)"
+            )
+        try:
+            import pyproj  # type: ignore[import-not-found, unused-ignore]
+        except ImportError as exc:
+            raise _Unmappable(
+                f"{what}: only longitude/latitude given; converting them needs pyproj (pip install pyproj)"
+            ) from exc
+        try:
+            x, y = pyproj.Proj(self.net.proj_parameter)(lon, lat)
+        except Exception as exc:  # pyproj raises its own CRSError / ProjError
+            raise _Unmappable(
+                f"{what}: longitude/latitude ({lon}, {lat}) cannot be projected with the network's "
+                f"projParameter {self.net.proj_parameter!r}: {exc}"
+            ) from exc
+        return float(x) + self.net.offset[0], float(y) + self.net.offset[1]
+
+    def _edge(self, edge_id: str) -> _Edge | None:
+        return _normal_edge(self.net, edge_id)
 
     def _place_on_edge(
         self, edge_id: str, lane_id: str | None, xy: tuple[float, float], vclass: str
-    ) -> tuple[Any, float, float, float]:
+    ) -> tuple[_Lane, float, float, float]:
         """(lane, s, signed offset, distance) of `xy` on `lane_id` if it is open to `vclass`,
         else on the nearest lane of `edge_id` open to it."""
-        edge = self.net.edge(edge_id)
-        if edge is None:
-            raise _Unmappable(f"edge {edge_id!r} is not in the network {self.net.path.name}")
-        lanes = _vclass_lanes(edge, vclass)
-        given = [ln for ln in lanes if ln.getID() == lane_id]
-        lanes = given or lanes
+        if self._edge(edge_id) is None:
+            raise _Unmappable(f"edge {edge_id!r} is not in the network {self.net_path.name}")
+        lanes = _open_lanes(self.net, edge_id, vclass)
+        lanes = [ln for ln in lanes if ln["id"] == lane_id] or lanes
         if not lanes:
             raise _Unmappable(f"edge {edge_id!r} has no lane open to class {vclass}")
-        chosen = lanes
         best = None
-        for ln in chosen:
-            s, off, _ = project_on_polyline(ln.getShape(), *xy)
+        for ln in lanes:
+            s, off = self.net.project(ln["id"], *xy)
             if best is None or abs(off) < abs(best[2]):
                 best = (ln, s, off)
         assert best is not None
         ln, s, off = best
         # SUMO's lane length may differ from its shape's (ours checks s against the former).
-        length = min(self.net.lane_shape_len(ln), ln.getLength())
+        length = min(ln["shape_length_m"], ln["length_m"])
         s = min(max(s, 0.0), math.floor(length * 1e4) / 1e4)
         return ln, s, off, abs(off)
 
@@ -696,9 +664,9 @@ class OfficialImporter:
             edges = [str(e) for e in hero.get("route_edges") or []]
             if not edges:
                 raise _Unmappable("no route_edges")
-            missing = [e for e in edges if self.net.edge(e) is None]
+            missing = [e for e in edges if self._edge(e) is None]
             if missing:
-                raise _Unmappable(f"route edges {missing} are not in the network {self.net.path.name}")
+                raise _Unmappable(f"route edges {missing} are not in the network {self.net_path.name}")
             vclass = hero.get("vclass") or "passenger"
             pts = hero.get("reference_points") or []
             depart = hero.get("depart") or {}
@@ -707,34 +675,35 @@ class OfficialImporter:
                 start_xy = self._point(pts[0], "hero start", rep)
                 ln, s, off, _ = self._place_on_edge(edges[0], lane_id, start_xy, vclass)
             else:
-                ln = self.net.net.getLane(lane_id) if lane_id and self.net.net.hasLane(lane_id) else None
-                if ln is None:
+                known = self.net.lane(lane_id) if lane_id else None
+                if known is None or known["function"] not in ("normal", "connector"):
                     raise _Unmappable("neither reference points nor a known depart lane")
+                ln = known
                 s, off = float(depart.get("lane_pos") or 0.0), 0.0
                 rep.notes.append("hero start from its depart lane and position (no reference points)")
             width = self._type_dims(hero.get("sumo_type_id"))[1] if self.vtypes else 2.0
             # The original spawns the ego at the editor's point. Where that point lies on the road
             # (on any lane of the edge but a sidewalk, e.g. a narrow lane closed to cars) it is
             # kept exactly; elsewhere (on a kerb) the ego is moved into its lane.
-            max_off = max(0.0, ln.getWidth() / 2 - width / 2)
+            max_off = max(0.0, ln["width_m"] / 2 - width / 2)
             on_road = pts and self._on_road(edges[0], start_xy)
             start_off = off if on_road else max(-max_off, min(max_off, off))
             if on_road and abs(off) > max_off + SNAP_REPORT_M:
                 rep.notes.append(
                     f"ego starts at the editor's point, {abs(off):.2f} m off the centre of lane "
-                    f"{ln.getID()} (on another lane of the road)"
+                    f"{ln['id']} (on another lane of the road)"
                 )
             if abs(start_off - off) > SNAP_REPORT_M:
                 rep.notes.append(
-                    f"ego start moved {abs(start_off - off):.2f} m sideways into lane {ln.getID()} "
+                    f"ego start moved {abs(start_off - off):.2f} m sideways into lane {ln['id']} "
                     f"(the editor's point is {abs(off):.2f} m off its centre)"
                 )
-            start = {"lane": ln.getID(), "s": s, "offset_m": start_off}
+            start = {"lane": ln["id"], "s": s, "offset_m": start_off}
             elen, ewid, _eh = self._type_dims(hero.get("sumo_type_id")) if self.vtypes else (4.9, 2.0, 1.5)
-            self._ego_box = _lane_box(ln, s, start_off, elen, ewid)
+            self._ego_box = self.net.lane_box(ln["id"], s, start_off, elen, ewid)
             spawn = hero.get("carla_spawn") or {}
-            if _f(spawn.get("yaw")) is not None and len(ln.getShape()) >= 2:
-                lane_heading = project_on_polyline(ln.getShape(), *self._lane_xy(ln, s))[2]
+            if _f(spawn.get("yaw")) is not None:
+                lane_heading = math.degrees(self.net.position(ln["id"], s)[2])
                 diff = abs((carla_yaw_to_heading_deg(float(spawn["yaw"])) - lane_heading + 180) % 360 - 180)
                 if diff > 15:
                     rep.notes.append(
@@ -747,9 +716,9 @@ class OfficialImporter:
                 if edist > SNAP_REPORT_M * 4:
                     rep.notes.append(
                         f"ego destination is {edist:.2f} m from the nearest drivable lane of its last edge "
-                        f"{edges[-1]}: placed on {eln.getID()} at s = {es:.1f}"
+                        f"{edges[-1]}: placed on {eln['id']} at s = {es:.1f}"
                     )
-                destination = {"lane": eln.getID(), "s": es}
+                destination = {"lane": eln["id"], "s": es}
             else:
                 destination = None
                 rep.notes.append("hero has no end point: destination = end of the last route edge")
@@ -773,20 +742,13 @@ class OfficialImporter:
 
     def _on_road(self, edge_id: str, xy: tuple[float, float]) -> bool:
         """Whether `xy` lies on a lane of the edge other than a sidewalk."""
-        edge = self.net.edge(edge_id)
-        for ln in edge.getLanes() if edge is not None else []:
-            if ln.getPermissions() <= {"pedestrian", "wheelchair"}:
+        for ln in self.net.lanes(edge=edge_id) if self._edge(edge_id) is not None else []:
+            if set(ln["allow"]) <= {"pedestrian", "wheelchair"}:
                 continue
-            _s, off, _h = project_on_polyline(ln.getShape(), *xy)
-            if abs(off) <= ln.getWidth() / 2:
+            _s, off = self.net.project(ln["id"], *xy)
+            if abs(off) <= ln["width_m"] / 2:
                 return True
         return False
-
-    def _lane_xy(self, lane: Any, s: float) -> tuple[float, float]:
-        import sumolib
-
-        x, y = sumolib.geomhelper.positionAtShapeOffset(lane.getShape(), s)
-        return float(x), float(y)
 
     def _type_dims(self, type_id: str | None) -> tuple[float, float, float]:
         vt = (self.vtypes or {}).get(type_id or "", {})
@@ -800,9 +762,9 @@ class OfficialImporter:
         edges = [str(e) for e in a.get("route_edges") or []]
         if not edges:
             raise _Unmappable("no route_edges")
-        missing = [e for e in edges if self.net.edge(e) is None]
+        missing = [e for e in edges if self._edge(e) is None]
         if missing:
-            raise _Unmappable(f"route edges {missing} are not in the network {self.net.path.name}")
+            raise _Unmappable(f"route edges {missing} are not in the network {self.net_path.name}")
         type_id = a.get("sumo_type_id")
         if self.vtypes is not None:
             if type_id not in self.vtypes:
@@ -813,40 +775,38 @@ class OfficialImporter:
             vclass = str(a.get("vclass") or "passenger")
             vtype = _BUILTIN_TYPE_BY_VCLASS.get(vclass, "car")
             rep.notes.append(f"{label}: type {type_id!r} drawn as our {vtype!r} (no vehicle-type file given)")
-        first = self.net.edge(edges[0])
-        assert first is not None
         depart = a.get("depart") or {}
         if depart.get("edge_id") not in (None, edges[0]):
             raise _Unmappable(
                 f"departs on edge {depart.get('edge_id')!r}, not on its route's first edge {edges[0]!r}"
             )
-        lanes = first.getLanes()
+        lanes = self.net.lanes(edge=edges[0])
         idx = depart.get("lane_index")
         if isinstance(idx, int) and not 0 <= idx < len(lanes):
             raise _Unmappable(f"depart lane index {idx} but edge {edges[0]!r} has {len(lanes)} lanes")
-        if isinstance(idx, int) and not lanes[idx].allows(vclass):
+        open_idx = [ln["index"] for ln in _open_lanes(self.net, edges[0], vclass)]
+        if isinstance(idx, int) and idx not in open_idx:
             # SUMO refuses the whole route file over such a vehicle ("Invalid departLane"); the
             # nearest lane open to its class keeps it where the editor put it, give or take a lane.
-            open_idx = [i for i, ln in enumerate(lanes) if ln.allows(vclass)]
             if not open_idx:
                 raise _Unmappable(f"no lane of its first edge {edges[0]!r} is open to its class {vclass}")
             want: int = idx
             new = min(open_idx, key=lambda i: (abs(i - want), i))
             rep.notes.append(
-                f"CHANGED {label}: depart lane {lanes[idx].getID()} is closed to its class {vclass} "
-                f"(SUMO cannot insert it there): departs on {lanes[new].getID()}"
+                f"CHANGED {label}: depart lane {lanes[idx]['id']} is closed to its class {vclass} "
+                f"(SUMO cannot insert it there): departs on {lanes[new]['id']}"
             )
             idx = new
         for e in edges:
-            edge = self.net.edge(e)
-            if edge is not None and not _vclass_lanes(edge, vclass):
+            if not _open_lanes(self.net, e, vclass):
                 raise _Unmappable(f"route edge {e!r} has no lane open to its class {vclass}")
         for e0, e1 in pairwise(edges):
-            a0, a1 = self.net.edge(e0), self.net.edge(e1)
-            if a0 is not None and a1 not in a0.getOutgoing():
+            a0 = self._edge(e0)
+            if a0 is not None and e1 not in a0["successors"]:
                 rep.notes.append(f"{label}: route gap {e0} → {e1} filled by shortest-path routing")
         pos = _f(depart.get("lane_pos"))
-        length = first.getLength()
+        # SUMO's length of an edge is that of its first lane.
+        length = lanes[0]["length_m"]
         if pos is not None and not 0.0 <= pos <= length:
             rep.notes.append(
                 f"{label}: depart position {pos:.2f} m clamped to edge {edges[0]} (0 … {length:.2f} m)"
@@ -856,12 +816,12 @@ class OfficialImporter:
             lane = lanes[idx]
             front = pos if pos is not None else 0.0
             vlen, vwid, _h = self._type_dims(type_id) if self.vtypes else (4.5, 1.9, 1.5)
-            box = _lane_box(lane, front - vlen / 2, 0.0, vlen, vwid)
-            if boxes_overlap(box, self._ego_box):
+            box = self.net.lane_box(lane["id"], front - vlen / 2, 0.0, vlen, vwid)
+            if box.overlaps(self._ego_box):
                 # The original's CARLA bridge spawns each vehicle SUMO inserts; CARLA refuses a
                 # spawn that collides, so this vehicle never appeared in the original's world.
                 raise _Unmappable(
-                    f"departs overlapping the ego's start ({lane.getID()} at {front:.2f} m): the "
+                    f"departs overlapping the ego's start ({lane['id']} at {front:.2f} m): the "
                     "original's CARLA spawn of it would collide and fail, so it never appeared there"
                 )
         t = _f(depart.get("time_seconds")) or 0.0

@@ -22,7 +22,6 @@ from drivehierarchy.scenario_import import (
     carla_to_sumo,
     carla_yaw_to_heading_deg,
     category_for,
-    project_on_polyline,
     sumo_to_carla,
 )
 from drivehierarchy.scenarios import builtin_root, sumo_home
@@ -72,14 +71,6 @@ def test_category_folders_map_to_ours() -> None:
         category_for("11_extra")
     with pytest.raises(ValueError, match="misc"):
         category_for("misc")
-
-
-def test_projection_signed_offset_left_positive() -> None:
-    shape = [(0.0, 0.0), (10.0, 0.0), (10.0, 10.0)]
-    s, off, heading = project_on_polyline(shape, 4.0, 1.5)
-    assert (s, off, heading) == pytest.approx((4.0, 1.5, 0.0))
-    s, off, heading = project_on_polyline(shape, 11.0, 5.0)
-    assert (s, off, heading) == pytest.approx((15.0, -1.0, 90.0))  # right of the northbound leg
 
 
 # ---------------------------------------------------------------------------------------------
@@ -210,6 +201,86 @@ def test_unmappable_actors_are_reported_not_dropped(tmp_path: Path) -> None:
     assert doc["traffic"]["mode"] == "sumo" and doc["traffic"]["warmup_s"] == 0.0
     assert (out / doc["traffic"]["vtypes"].split("/")[-1]).is_file()  # copied into OUT
     assert json.loads((out / "import_report.json").read_text(encoding="utf-8"))["unmapped_actors"] == 4
+
+
+def test_written_file_keeps_the_style_of_the_shipped_scenarios(tmp_path: Path) -> None:
+    """The whole file as written (tomlkit, set to the shipped scenarios' style: spaced inline
+    tables, one per line two spaces in), so a format change shows up here, not in users' diffs."""
+    src = _crafted_scene(tmp_path)
+    out = tmp_path / "out"
+    OfficialImporter(TOWN01, out, vtypes=tmp_path / "types.rou.xml").import_dir(src)
+    text = (out / "07_sudden_brake" / "SC_TEST.toml").read_text(encoding="utf-8")
+    head, tail = text.split("\nmap = ", 1)
+    assert head == (
+        "# Imported from the original DriveHierarchy release by\n"
+        "# `drivehierarchy scenario import-official`.\n"
+        "# Source: 07_sudden_brake/SC_TEST/entity_sumo.json\n"
+        "version = 1\n"
+        'id = "official_SC_TEST"\n'
+        'name = "07_sudden_brake/SC_TEST"\n'
+        'category = "07_sudden_brake"\n'
+        "description = \"Original R4 scene SC_TEST (07_sudden_brake) on the user's network; "
+        'editor note: crafted"'
+    )
+    assert (
+        tail.split("\n", 1)[1]
+        == """reference_duration_s = 30.0
+duration_s = 42.0
+seed = 3
+
+[ego]
+route_edges = ["C2T"]
+start = { lane = "C2T_1", s = 19.6, offset_m = 0.0 }
+destination = { lane = "C2T_1", s = 289.6 }
+speed_mps = 0.0
+
+[ego.vehicle]
+length_m = 4.89
+width_m = 1.84
+height_m = 1.49
+
+[[actors]]
+name = "pedestrian 200 (pedestrian200)"
+kind = "pedestrian"
+waypoints = [
+  { x = 150.0, y = -7.4 },
+  { x = 150.0, y = 2.0, speed_mps = 1.5 },
+  { x = 152.0, y = 6.0, speed_mps = 1.2 },
+]
+at_end = "stop"
+
+[traffic]
+mode = "sumo"
+vtypes = "../types.rou.xml"
+warmup_s = 0.0
+
+[[traffic.vehicles]]
+id = "slave_100"
+vtype = "vehicle.dodge.charger_2020"
+route = ["C2T", "T2E"]
+depart_s = 0.0
+depart_lane = 1
+depart_pos_m = 60.0
+depart_speed = 0.0
+"""
+    )
+
+
+def test_vehicles_of_unknown_class_or_placed_by_longitude_latitude_are_reported(tmp_path: Path) -> None:
+    src = _crafted_scene(tmp_path)
+    f = src / "07_sudden_brake" / "SC_TEST" / "entity_sumo.json"
+    data = json.loads(f.read_text(encoding="utf-8"))
+    data["background_vehicles"][0]["vclass"] = "hovercraft"
+    ped = data["background_vehicles"][2]
+    ped["reference_points"][0] = {"point_type": "start", "longitude": 121.2, "latitude": 31.3}
+    f.write_text(json.dumps(data), encoding="utf-8")
+    report = OfficialImporter(TOWN01, tmp_path / "out").import_dir(src)  # no type file: vclass used
+    (scene,) = report.scenes
+    reasons = {u.actor.split(" (")[0]: u.reason for u in scene.unmapped}
+    assert reasons["slave 100"] == "vehicle class 'hovercraft' is not a SUMO vehicle class"
+    # town01 has no geo-projection (projParameter "!"): said so, with the network's name.
+    assert "point 0: only longitude/latitude given" in reasons["pedestrian 200"]
+    assert "town01.net.xml has no geo-projection" in reasons["pedestrian 200"]
 
 
 def test_cli_strict_exit_and_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
