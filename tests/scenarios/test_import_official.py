@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 
-from drivehierarchy import _core
+from drivehierarchy import ScenarioError, _core
 from drivehierarchy.cli import main
 from drivehierarchy.scenario_import import (
     CATEGORY_BY_NUMBER,
@@ -281,6 +281,22 @@ def test_vehicles_of_unknown_class_or_placed_by_longitude_latitude_are_reported(
     # town01 has no geo-projection (projParameter "!"): said so, with the network's name.
     assert "point 0: only longitude/latitude given" in reasons["pedestrian 200"]
     assert "town01.net.xml has no geo-projection" in reasons["pedestrian 200"]
+
+
+def test_unreadable_network_names_file_line_attribute_and_value(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    src = _crafted_scene(tmp_path)
+    bad = tmp_path / "bad.net.xml"
+    bad.write_text(
+        '<net>\n<edge id="A"><lane id="A_0" index="0" speed="x" length="5" shape="0,0 1,1"/></edge></net>\n',
+        encoding="utf-8",
+    )
+    with pytest.raises(ScenarioError, match=r'bad\.net\.xml: line 2: .*attribute speed = "x"'):
+        OfficialImporter(bad, tmp_path / "out")
+    args = ["scenario", "import-official", str(src), "--net", str(bad), "--out", str(tmp_path / "o")]
+    assert main(args) == 2
+    assert 'attribute speed = "x": not a finite number' in capsys.readouterr().err
 
 
 def test_cli_strict_exit_and_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
