@@ -133,8 +133,9 @@ impl PyNetwork {
         }
     }
 
-    /// Lanes as dicts (see `lane`), in file order or, for one `edge`, by index: only those
-    /// allowing `vclass` when given; junction-internal lanes only when `internal`.
+    /// Lanes as dicts (see `lane`): every lane in file order (junction-internal ones only when
+    /// `internal`), or the lanes of one `edge` by index; only those allowing `vclass` when given.
+    /// An unknown edge raises `ScenarioError`, an unknown class `ConfigError`.
     #[pyo3(signature = (edge=None, vclass=None, internal=false))]
     fn lanes<'py>(
         &self,
