@@ -1,5 +1,6 @@
 """Speed of `score_run` on 14,000 and 76,798 synthetic predictions, beside a pure-Python
-reference of the same scorers (written from PROTOCOL §1.2–1.3). Both must give identical
+reference of the same scorers (written from docs/protocol.md#answer-parsing, #record-scores). Both
+must give identical
 per-record scores, which also cross-checks the Rust parsers on varied and odd replies.
 
 Usage: python scripts/bench_openloop_score.py [--sizes 14000 76798] [--strict-time]
