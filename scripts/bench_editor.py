@@ -39,7 +39,10 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--times", default="5,15,30", help="preview times, s")
     ap.add_argument("--limit", type=int, default=0, help="first N scenarios only")
+    ap.add_argument("--quick", action="store_true", help="smoke run (CI): one scenario, one time")
     args = ap.parse_args()
+    if args.quick:
+        args.limit, args.times = 1, "1"
     files = sorted(p.relative_to(ROOT).as_posix() for p in ROOT.glob("*/*.toml"))
     if args.limit:
         files = files[: args.limit]

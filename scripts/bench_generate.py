@@ -27,7 +27,10 @@ def main() -> int:
     ap.add_argument("--out", type=Path, default=None, help="keep the set here (default: a temp folder)")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--strict-time", action="store_true", help=f"exit 1 above {TARGET_S:.0f} s")
+    ap.add_argument("--quick", action="store_true", help="smoke run (CI): 2 per task from one category")
     args = ap.parse_args()
+    if args.quick:
+        args.per_task, args.suite, args.jobs, args.strict_time = 2, args.suite / "02_obstacles", 1, False
     with tempfile.TemporaryDirectory() as tmp:
         out = args.out or Path(tmp) / "generated"
         t0 = time.perf_counter()

@@ -29,7 +29,10 @@ def main() -> int:
     ap.add_argument("--records", type=int, default=2000, help="about this many records in total")
     ap.add_argument("--latency-ms", type=float, default=100.0)
     ap.add_argument("--concurrency", type=int, default=64)
+    ap.add_argument("--quick", action="store_true", help="smoke run (CI): 70 records; no in-flight target")
     args = ap.parse_args()
+    if args.quick:
+        args.records, args.latency_ms, args.concurrency = 70, 20.0, 8
 
     per_task = max(1, round(args.records / 14))
     with tempfile.TemporaryDirectory(prefix="olrun-bench-") as tmp:
@@ -61,7 +64,9 @@ def main() -> int:
         print(f"requests/s         {n / dt:.1f}")
         print(f"max in flight      {server.stats.max_in_flight} (target >= 32)")
         print(f"all answered right {ok}")
-        return 0 if ok and server.stats.max_in_flight >= min(32, args.concurrency) else 1
+        # In a smoke run the overlap depends on the machine's load; only the answers must hold.
+        overlap = args.quick or server.stats.max_in_flight >= min(32, args.concurrency)
+        return 0 if ok and overlap else 1
 
 
 if __name__ == "__main__":

@@ -31,7 +31,10 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", type=int, nargs="+", default=[14000, 76798])
     ap.add_argument("--strict-time", action="store_true", help="exit 1 when a time target is missed")
+    ap.add_argument("--quick", action="store_true", help="smoke run (CI): 1,400 predictions, no time target")
     args = ap.parse_args()
+    if args.quick:
+        args.sizes, args.strict_time = [1400], False
     failed = False
     for n in args.sizes:
         with tempfile.TemporaryDirectory() as tmp:

@@ -81,7 +81,10 @@ def highway_stepper(env_id: str) -> Callable[[], int] | None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--seconds", type=float, default=5.0, help="measuring time per row")
+    ap.add_argument("--quick", action="store_true", help="smoke run (CI): 0.2 s per row")
     args = ap.parse_args()
+    if args.quick:
+        args.seconds = 0.2
     if not BENCH_SCENARIO.exists():
         raise SystemExit(f"benchmark scenario missing: {BENCH_SCENARIO}")
 

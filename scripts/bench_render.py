@@ -217,7 +217,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--decisions", type=int, default=24, help="expert decisions before measuring")
     ap.add_argument("--no-highway", action="store_true")
     ap.add_argument("--no-pin", action="store_true", help="do not pin the process to one core")
+    ap.add_argument("--quick", action="store_true", help="smoke run (CI): 0.1 s per measurement")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.seconds, args.decisions = 0.1, 4
 
     pinned = "not pinned" if args.no_pin else pin_one_core()
     import drivehierarchy

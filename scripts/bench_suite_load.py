@@ -269,10 +269,20 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=5, help="warm repetitions per scenario")
     ap.add_argument("--jobs", type=int, default=1, help="worker processes at once (1 = cleanest timing)")
     ap.add_argument("--no-sumo", action="store_true", help="skip the SUMO series")
+    ap.add_argument(
+        "--quick", action="store_true", help="smoke run (CI): one scenario with SUMO, one without, once"
+    )
     args = ap.parse_args()
 
     from drivehierarchy.scenarios import builtin_root
 
+    if args.quick:
+        r4 = builtin_root() / "r4"
+        args.repeat = 1
+        args.targets = args.targets or [
+            str(r4 / "02_obstacles" / "town01_02_cones_right_lane.toml"),
+            str(r4 / "06_traffic_flow" / "bs3d_09_left_turner_queue.toml"),
+        ]
     files = scenario_files(args.targets or [str(builtin_root() / "r4")])
     info = {f: describe(f) for f in files}
     with_sumo = [] if args.no_sumo else [f for f in files if info[f][1] == "sumo"]
@@ -303,6 +313,8 @@ def main() -> None:
         for f, msgs in failed.items():
             for m in msgs:
                 print(f"  {f}: {m}", file=sys.stderr)
+        if args.quick:  # a smoke run exists to catch exactly this
+            raise SystemExit(1)
     files = [f for f in files if f in res_plain]
     if not files:
         raise SystemExit("no scenario could be timed")

@@ -207,7 +207,10 @@ def main() -> None:
     ap.add_argument("--backends", default="native,python", help="SUMO backends to time (native,python,traci)")
     ap.add_argument("--repeats", type=int, default=3, help="runs per measurement (the fastest counts)")
     ap.add_argument("--clock", choices=("cpu", "wall"), default="cpu", help="thread CPU time or wall time")
+    ap.add_argument("--quick", action="store_true", help="smoke run (CI): 200 ticks, one run each")
     args = ap.parse_args()
+    if args.quick:
+        args.ticks, args.repeats = 200, 1
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     iso = functools.partial(_isolated, args.clock, args.repeats)

@@ -66,7 +66,7 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def run_suite(base_url: str, jobs: int, seeds: int, out: Path) -> tuple[float, dict]:
+def run_suite(base_url: str, jobs: int, seeds: int, out: Path, limit: int = 0) -> tuple[float, dict]:
     from drivehierarchy.agents.vlm import VLMOptions
     from drivehierarchy.benchmark.r4 import runner
 
@@ -74,7 +74,8 @@ def run_suite(base_url: str, jobs: int, seeds: int, out: Path) -> tuple[float, d
         agent="vlm", vlm=VLMOptions(base_url=base_url, model="test-model"), jobs=jobs, seeds=seeds
     )
     t0 = time.perf_counter()
-    results = runner.evaluate(runner.suite_scenarios("builtin"), out, opts, log=lambda _: None)
+    scenarios = runner.suite_scenarios("builtin")
+    results = runner.evaluate(scenarios[:limit] if limit else scenarios, out, opts, log=lambda _: None)
     wall = time.perf_counter() - t0
     summary = json.loads((out / "summary.json").read_text())
     summary["per_scenario_decisions"] = [r["vlm"]["decisions"] for r in results]
@@ -98,10 +99,15 @@ def main() -> int:
     )
     ap.add_argument("--jobs", type=int, default=16)
     ap.add_argument("--skip-serial", action="store_true", help="only the overhead and the --jobs run")
+    ap.add_argument(
+        "--quick", action="store_true", help="smoke run (CI): 10 decisions, 2 scenarios, 2 jobs, 20 ms"
+    )
     args = ap.parse_args()
+    if args.quick:
+        args.latency_ms, args.jobs = 20.0, 2
 
     print(f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at the start")
-    o = overhead_per_decision()
+    o = overhead_per_decision(10 if args.quick else 200)
     total = o["step_ms"] + o["build_ms"]
     print(f"overhead per decision over {o['decisions']} decisions:")
     print(f"  simulator step          {o['step_ms']:7.2f} ms")
@@ -122,14 +128,15 @@ def main() -> int:
         server.stderr.readline()  # "serving ..." once it listens
         url = f"http://127.0.0.1:{port}/v1"
         with tempfile.TemporaryDirectory() as tmp:
-            fast, s_fast = run_suite(url, args.jobs, args.seeds, Path(tmp) / "parallel")
+            limit = 2 if args.quick else 0
+            fast, s_fast = run_suite(url, args.jobs, args.seeds, Path(tmp) / "parallel", limit)
             n = s_fast["scenarios"]
             print(f"\nsuite × {args.seeds} seeds = {n} scenarios ({s_fast['sumo_scenarios']} with SUMO "
                   f"traffic), {s_fast['decisions']} decisions, "
                   f"{args.latency_ms:.0f} ms per request:")  # fmt: skip
             print(f"  --jobs {args.jobs:<3}  {fast:8.1f} s   R4 {s_fast['r4_score']:.3f}")
             if not args.skip_serial:
-                slow, s_slow = run_suite(url, 1, args.seeds, Path(tmp) / "serial")
+                slow, s_slow = run_suite(url, 1, args.seeds, Path(tmp) / "serial", limit)
                 print(f"  --jobs 1    {slow:8.1f} s   R4 {s_slow['r4_score']:.3f}")
                 print(f"  speed-up    {slow / fast:8.1f} ×  (target ≥ 10 ×)")
                 per = 1e3 * slow / s_slow["decisions"] - args.latency_ms

@@ -12,7 +12,7 @@ import unicodedata
 from collections.abc import Callable
 from pathlib import Path
 
-OUT = Path("benchmark/src/pyunicode/tables.rs")
+OUT = Path(__file__).resolve().parents[1] / "benchmark" / "src" / "pyunicode" / "tables.rs"
 
 
 def ranges(pred: Callable[[str], bool]) -> list[tuple[int, int]]:
@@ -35,7 +35,10 @@ def table(name: str, doc: str, rs: list[tuple[int, int]]) -> str:
     return f"/// {doc}\npub(crate) const {name}: &[(u32, u32)] = &[\n{body}];\n\n"
 
 
-def main() -> None:
+def main() -> int:
+    # --quick (CI): regenerate in memory and compare with the committed file, so the tables and
+    # the Python the project runs on cannot drift apart unnoticed; writes nothing.
+    quick = "--quick" in sys.argv[1:]
     zeros = [cp for cp in range(0x110000) if unicodedata.decimal(chr(cp), -1) == 0]
     for cp in range(0x110000):
         v = unicodedata.decimal(chr(cp), -1)
@@ -57,9 +60,20 @@ def main() -> None:
         "/// Code points whose decimal value is 0; digit value = cp - nearest zero below.\n"
         f"pub(crate) const DECIMAL_ZEROS: &[u32] = &[\n{body}];\n"
     )
+    if quick:
+        # The CPython line names the patch release, which does not change the tables.
+        def body_of(t: str) -> list[str]:
+            return [line for line in t.splitlines() if not line.startswith("// CPython ")]
+
+        if body_of(OUT.read_text(encoding="utf-8")) != body_of(text):
+            print(f"{OUT} differs from this Python's tables: run scripts/gen_pyunicode_tables.py")
+            return 1
+        print(f"{OUT} matches this Python's tables (Unicode {unicodedata.unidata_version})")
+        return 0
     OUT.write_text(text, encoding="utf-8")
     print(f"wrote {OUT}")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -47,7 +47,10 @@ def main() -> int:
     ap.add_argument("--n", type=int, default=50)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=Path("review"))
+    ap.add_argument("--quick", action="store_true", help="smoke run (CI): 3 records")
     args = ap.parse_args()
+    if args.quick:
+        args.n = 3
     cat = default_catalog(args.data_dir)
     records = [r for ds in cat.datasets for r in load_dataset(cat, ds, ImageRootMap.parse([])).records]
     if not records:

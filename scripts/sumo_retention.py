@@ -110,8 +110,8 @@ def recorded_commands(scenarios: list[Path], keep: Path) -> list[list[str]]:
     return cmds
 
 
-def run_variant(variant: str, episodes: int) -> dict[str, Any]:
-    scenarios = sumo_scenarios()
+def run_variant(variant: str, episodes: int, limit: int = 0) -> dict[str, Any]:
+    scenarios = sumo_scenarios()[:limit] if limit else sumo_scenarios()
     if variant in ("alone", "loads", "nets"):
         import libsumo
 
@@ -164,17 +164,22 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--episodes", type=int, default=600, help="episodes after the warm-up (600)")
     ap.add_argument("--traci", action="store_true", help="also SUMO over TraCI (SUMO as a subprocess)")
     ap.add_argument("--variant", choices=sorted(VARIANTS), help=argparse.SUPPRESS)  # one child's run
+    ap.add_argument("--quick", action="store_true", help="smoke run (CI): 2 scenarios, 4 episodes each")
     a = ap.parse_args(argv)
+    limit = 2 if a.quick else 0
+    if a.quick:
+        a.episodes = 4
     if a.variant:
-        print(json.dumps(run_variant(a.variant, a.episodes)), flush=True)
+        print(json.dumps(run_variant(a.variant, a.episodes, limit)), flush=True)
         return 0
     variants = ["none", "shim", "module", "alone", "loads", "nets"] + (["traci"] if a.traci else [])
-    n = len(sumo_scenarios())
+    n = min(len(sumo_scenarios()), limit or len(sumo_scenarios()))
     print(f"{a.episodes} episodes over {n} SUMO scenarios, {TICKS} ticks each, after a warm-up pass")
     print(f"{'':28} {'RSS warm':>9} {'RSS end':>9} {'KB/episode':>11} {'2nd half':>9} {'growth':>8}")
     for v in variants:
         done = subprocess.run(
-            [sys.executable, __file__, "--variant", v, "--episodes", str(a.episodes)],
+            [sys.executable, __file__, "--variant", v, "--episodes", str(a.episodes)]
+            + (["--quick"] if a.quick else []),
             capture_output=True,
             text=True,
             check=False,

@@ -1,15 +1,25 @@
 #!/usr/bin/env bash
-# The whole test suite: formatting and lints (Rust + Python), the stub contract, the docs site,
-# Rust tests and the Python tests (Gymnasium/SB3 checkers, SUMO nets, loopback VLM server
-# included), the wheel smoke test from a fresh venv, and a bounded run of every fuzz target.
-# Installs every extra into .venv first.
+# The test gate, and a quick lane for the edit-test loop (docs/robustness.md#running-the-checks).
 #
-# Two lanes share the two cores. The Python lane installs (building the Rust core with maturin
-# while uv installs the dependencies), checks and runs pytest (two workers). The Rust lane
-# formats, builds and runs the fuzz targets (5 s each), waits for the install's build, then runs
-# clippy + the Rust tests on that same build and the wheel check. Each step prints when it
-# starts; the Rust lane's output is printed when it ends, and the script fails if either lane
-# failed.
+#   bash scripts/test.sh           the whole gate (what CI's .ci/run calls): installs every extra into
+#                                  .venv, then formatting and lints (Rust + Python), the stub contract,
+#                                  the docs site, the Rust tests, every Python test (Gymnasium/SB3
+#                                  checkers, SUMO nets, loopback VLM servers, browser, serving, Ray),
+#                                  the wheel smoke test from a fresh venv, and a bounded run of every
+#                                  fuzz target.
+#   bash scripts/test.sh --quick   lints (cargo fmt, ruff, stubtest) and the Python tests of every
+#                                  area except the slow end-to-end ones (QUICK_SKIP below), on the
+#                                  existing .venv; rebuilds the extension first only when a Rust
+#                                  source is newer than it. No Rust tests, docs build, wheel or fuzz.
+# Extra arguments go to pytest (`bash scripts/test.sh --quick -k scoring`).
+#
+# The full gate runs three lanes on the two cores. The Python lane installs (building the Rust
+# core with maturin while uv installs the dependencies), then runs pytest (two workers). The
+# checks lane starts when the install is done and runs ruff, stubtest and the docs build beside
+# pytest (they are short and would otherwise sit on the critical path). The Rust lane formats,
+# builds and runs the fuzz targets (5 s each), waits for the install's build, then runs clippy +
+# the Rust tests on that same build and the wheel check. Each step prints when it starts; the
+# background lanes' output is printed when they end, and the script fails if any lane failed.
 #
 # One release build serves the extension, clippy, the Rust tests and the wheel: the install, the
 # wheel and `cargo test --release` get the same profile, flags, features and build-script inputs
@@ -26,6 +36,11 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 start=$SECONDS
 step() { echo "== $1 (at $((SECONDS - start)) s)"; }
+quick=0
+if [ "${1:-}" = "--quick" ]; then
+    quick=1
+    shift
+fi
 
 BUILD=(
     RUSTFLAGS="-D warnings"
@@ -34,7 +49,62 @@ BUILD=(
     CARGO_PROFILE_RELEASE_OVERFLOW_CHECKS=true
     CARGO_PROFILE_RELEASE_DEBUG_ASSERTIONS=true
 )
+PY=.venv/bin/python
+
+# What --quick leaves to the full gate: the tests that drive the whole suite, train, start
+# servers, browsers or many SUMO processes (each tens of CPU-seconds or more). Every area keeps
+# its other tests. A new slow test file belongs here; `--durations` in the gate's log finds them.
+QUICK_SKIP=(
+    --ignore=tests/docs/test_docs_commands_run.py      # every documented command, as a process
+    --ignore=tests/docs/test_docs_build.py             # builds the docs site
+    --ignore=tests/fuzz/test_agent_fuzz.py             # 1,664 bad-driver episodes over the suite
+    --ignore=tests/editor/test_e2e.py                  # Chromium through Playwright
+    --ignore=tests/baselines/test_end_to_end.py        # RL / IL training runs
+    --ignore=tests/scenarios/test_suite.py             # 200 probe episodes + the suite's checks
+    --ignore=tests/scenarios/test_suite_probe.py       # the probe over several scenarios
+    --ignore=tests/scenarios/test_maps_rebuild.py      # netconvert rebuilds of every map
+    --ignore=tests/scenarios/test_import_official.py   # the expert over the imported scenes
+    --ignore=tests/faults/test_r4_worker_faults.py     # kills and restarts worker processes
+    --ignore=tests/vlm/test_vlm_sumo_workers.py        # SUMO scenarios in worker processes
+    --ignore=tests/vlm/test_vlm_kill_resume.py         # kills an evaluation and resumes it
+    --ignore=tests/scripts/test_scripts_quick.py       # each scripts/*.py --quick, as a process
+    # The expert over every suite scenario (the probe's 400 reference episodes).
+    --deselect=tests/envs/test_r4_env.py::test_expert_scores_at_least_90_on_every_builtin_scenario
+    # Whole generated sets twice, seeded evaluations, the paper's correlations, a torch judge.
+    --deselect=tests/openloop/generate/test_generate.py::test_same_options_give_byte_identical_files
+    --deselect=tests/openloop/generate/test_generate.py::test_train_split_plays_shifted_starts_reproducibly
+    --deselect=tests/vlm/test_vlm_evaluate.py::test_seeds_give_keys_intervals_and_reproducible_episodes
+    --deselect=tests/benchmark/test_openloop_report.py::test_report_reproduces_paper_rank_correlations
+    --deselect=tests/benchmark/test_scoring_judge.py::test_real_tiny_bert_judge_scores_run
+    -m "not serving and not ray"                       # transformers serve, a Ray cluster
+)
+
+if [ "$quick" = 1 ]; then
+    if ! "$PY" -c 'import drivehierarchy._core' 2>/dev/null; then
+        echo "test.sh --quick: no built drivehierarchy in .venv; run bash scripts/test.sh (or bash scripts/install.sh all) once" >&2
+        exit 1
+    fi
+    # A Rust change needs a new extension before pytest means anything. The gate's flags, so the
+    # quick lane and the gate share one build (clippy lints what is rebuilt).
+    core="$(ls python/drivehierarchy/_core*.so | head -1)"
+    if [ -n "$(find env agents benchmark python/src python/build.rs python/Cargo.toml Cargo.toml Cargo.lock \
+        -newer "$core" \( -name '*.rs' -o -name Cargo.toml -o -name Cargo.lock -o -name '*.cpp' \) \
+        -not -path '*/target/*' -not -path '*/tests/*' -print -quit)" ]; then
+        step "rebuild the extension (a Rust source is newer than $core)"
+        env -u SUMO_HOME "${BUILD[@]}" "$PY" -m pip install --quiet --no-deps -e .
+    fi
+    export PATH="$PWD/.venv/bin:$PATH"
+    step "cargo fmt"; cargo fmt --all -- --check
+    step "ruff";      $PY -m ruff check . && $PY -m ruff format --check .
+    step "stubtest";  $PY -m mypy.stubtest drivehierarchy._core --allowlist python/stubtest-allowlist.txt
+    step "pytest (quick)"
+    $PY -m pytest tests -n 2 --dist loadfile -q --durations=10 "${QUICK_SKIP[@]}" "$@"
+    step "done"
+    exit 0
+fi
+
 rust_log="$(mktemp)"
+checks_log="$(mktemp)"
 built="$(mktemp -u)"  # exists once the install has built the extension
 rust_lane() {
     set -euo pipefail
@@ -55,33 +125,60 @@ rust_lane() {
     step "rust: wheel"; env "${BUILD[@]}" bash scripts/wheel_check.sh
     step "rust: done"
 }
+# Ruff, the stub contract and the docs site: short, and independent of pytest, so they run beside
+# it instead of before it. The docs build is strict and not --quiet: --quiet raises the log level
+# above WARNING, so strict mode would never count a warning (tests/docs/test_docs_build.py holds
+# the gate to it). A clean build prints three lines.
+checks_lane() {
+    set -euo pipefail
+    step "checks: ruff";     $PY -m ruff check .
+                             $PY -m ruff format --check .
+    step "checks: stubtest"; $PY -m mypy.stubtest drivehierarchy._core --allowlist python/stubtest-allowlist.txt
+    step "checks: docs";     DISABLE_MKDOCS_2_WARNING=true NO_MKDOCS_2_WARNING=1 $PY -m mkdocs build --strict --site-dir "$(mktemp -d)"
+    step "checks: done"
+}
 rust_lane >"$rust_log" 2>&1 &
 rust_pid=$!
-# A failing Python lane (set -e) must not leave the Rust lane running.
-trap 'pkill -P "$rust_pid" 2>/dev/null; kill "$rust_pid" 2>/dev/null || true; rm -f "$built"' EXIT
+checks_pid=""
+# A failing Python lane (set -e) must not leave the other lanes running.
+cleanup() {
+    local pid
+    for pid in "$rust_pid" $checks_pid; do
+        pkill -P "$pid" 2>/dev/null || true
+        kill "$pid" 2>/dev/null || true
+    done
+    rm -f "$built"
+}
+trap cleanup EXIT
 
 env "${BUILD[@]}" bash scripts/install.sh all
 touch "$built"
-PY=.venv/bin/python
 export PATH="$PWD/.venv/bin:$PATH"
-step "ruff";     $PY -m ruff check .
-                 $PY -m ruff format --check .
-step "stubtest"; $PY -m mypy.stubtest drivehierarchy._core --allowlist python/stubtest-allowlist.txt
-step "docs";     DISABLE_MKDOCS_2_WARNING=true NO_MKDOCS_2_WARNING=1 $PY -m mkdocs build --strict --quiet --site-dir "$(mktemp -d)"
+checks_lane >"$checks_log" 2>&1 &
+checks_pid=$!
 # Two workers, each taking whole files (`--dist loadfile`): a file's module fixtures (the docs
 # walk's shared folder, a loopback server) stay in one process. (Three were not faster: the work
 # is CPU-bound.)
 step "pytest";   $PY -m pytest tests -n 2 --dist loadfile --durations=15 "$@"
-step "pytest done; waiting for the Rust lane"
+step "pytest done; waiting for the other lanes"
+checks_rc=0
+wait "$checks_pid" || checks_rc=$?
 rust_rc=0
 wait "$rust_pid" || rust_rc=$?
 trap - EXIT
 rm -f "$built"
+echo "---- checks lane (ruff, stubtest, docs) ----"
+cat "$checks_log"
 echo "---- Rust lane (fmt, fuzz, clippy, cargo test, wheel) ----"
 cat "$rust_log"
-rm -f "$rust_log"
+rm -f "$rust_log" "$checks_log"
+if [ "$checks_rc" != 0 ]; then
+    echo "test.sh: the checks lane failed (exit $checks_rc; its output is above)" >&2
+fi
 if [ "$rust_rc" != 0 ]; then
     echo "test.sh: the Rust lane failed (exit $rust_rc; its output is above)" >&2
-    exit "$rust_rc"
+fi
+if [ "$checks_rc" != 0 ] || [ "$rust_rc" != 0 ]; then
+    exit 1
 fi
 step "done"

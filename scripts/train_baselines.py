@@ -26,6 +26,28 @@ def run(*args: object) -> None:
         raise SystemExit(f"failed ({code}): drivehierarchy {' '.join(map(str, args))}")
 
 
+def quick_suite(folder: Path) -> Path:
+    """Three short built-in scenarios without SUMO, linked into `folder` as a suite (with the maps
+    beside it: the files name theirs as ../../maps/...)."""
+    from drivehierarchy.scenarios import builtin_root
+
+    r4 = builtin_root() / "r4"
+    maps = folder.parent / "maps"
+    if not maps.exists():
+        maps.parent.mkdir(parents=True, exist_ok=True)
+        maps.symlink_to(builtin_root() / "maps")
+    for name in (
+        "01_pedestrian/town01_01_midblock_crossing.toml",
+        "02_obstacles/town01_02_cones_right_lane.toml",
+        "09_yielding/town01_09_yield_left_turn.toml",
+    ):
+        link = folder / name
+        if not link.exists():
+            link.parent.mkdir(parents=True, exist_ok=True)
+            link.symlink_to(r4 / name)
+    return folder
+
+
 def timed(marker: Path, fn: object, *args: object) -> float:
     """Runs a step once; its wall time is kept in `marker` (a resumed run reports the first)."""
     if marker.exists():
@@ -46,7 +68,19 @@ def main() -> None:
     ap.add_argument("--dagger-iterations", type=int, default=6)
     ap.add_argument("--sac-minutes", type=float, default=0.0, help="also train SAC for this long (0 = no)")
     ap.add_argument("--until", choices=["collect", "bc", "dagger", "ppo", "eval"], default="eval")
+    ap.add_argument("--suite", default="builtin", help="'builtin', a folder of scenarios, or one file")
+    ap.add_argument(
+        "--quick",
+        action="store_true",
+        help="smoke run (CI): 3 scenarios, 2 demos, one pass each, 64 PPO steps",
+    )
     a = ap.parse_args()
+    steps: list[object] = ["--steps", 5_000_000]
+    epochs: list[object] = []
+    if a.quick:
+        a.suite = quick_suite(a.out / "suite" / "r4")
+        a.episodes, a.ppo_envs, a.dagger_iterations, a.ppo_minutes = 2, 1, 1, 1.0
+        steps, epochs = ["--steps", 64], ["--epochs", 1]
     order = ["collect", "bc", "dagger", "ppo", "eval"]
     last = order.index(a.until)
     out: Path = a.out
@@ -56,33 +90,35 @@ def main() -> None:
     walls["collect"] = timed(
         out / "collect.done",
         run,
-        *("baselines", "collect", "--agent", "expert", "--suite", "builtin"),
+        *("baselines", "collect", "--agent", "expert", "--suite", a.suite),
         *("--episodes", a.episodes, "--out", data),
     )
     if last < 1:
         return
-    walls["bc"] = timed(out / "bc.done", run, "baselines", "train", "bc", "--data", data, "--out", out / "bc")
+    walls["bc"] = timed(
+        out / "bc.done", run, "baselines", "train", "bc", "--data", data, "--out", out / "bc", *epochs
+    )
     if last < 2:
         return
     walls["dagger"] = timed(
         out / "dagger.done",
         run,
         *("baselines", "train", "dagger", "--data", data, "--out", out / "dagger"),
-        *("--iterations", a.dagger_iterations),
+        *("--iterations", a.dagger_iterations, *epochs),
     )
     if last < 3:
         return
     walls["ppo"] = timed(
         out / "ppo.done",
         run,
-        *("baselines", "train", "ppo", "--suite", "builtin", "--steps", 5_000_000),
+        *("baselines", "train", "ppo", "--suite", a.suite, *steps),
         *("--envs", a.ppo_envs, "--vec", "dummy", "--max-minutes", a.ppo_minutes, "--out", out / "ppo"),
     )
     if a.sac_minutes > 0:
         walls["sac"] = timed(
             out / "sac.done",
             run,
-            *("baselines", "train", "sac", "--suite", "builtin", "--steps", 5_000_000),
+            *("baselines", "train", "sac", "--suite", a.suite, *steps),
             *("--envs", 4, "--vec", "dummy", "--max-minutes", a.sac_minutes, "--out", out / "sac"),
         )
     if last < 4:
@@ -102,7 +138,7 @@ def main() -> None:
     results: dict[str, dict[str, float]] = {}
     for label, agent in agents.items():
         ev = out / "eval" / label.split()[0].lower()
-        run("r4", "evaluate", "--agent", agent, "--suite", "builtin", "--out", ev)
+        run("r4", "evaluate", "--agent", agent, "--suite", a.suite, "--out", ev)
         lines = (ev / "results.jsonl").read_text().splitlines()
         results[label] = {json.loads(x)["key"]: json.loads(x)["score"]["score_composed"] for x in lines}
     keys = sorted(next(iter(results.values())))

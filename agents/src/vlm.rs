@@ -1,4 +1,4 @@
-//! VLM reply parser (PROTOCOL.md §2.3): text → (steer, target speed) decision.
+//! VLM reply parser (docs/protocol.md#r4-actuation): text → (steer, target speed) decision.
 //!
 //! Mirrors the original Python (`re.search` on `reply.lower()`, then `float()`), including
 //! Python's notion of `\s` (which also matches U+001C–U+001F) and `\d` (any Unicode decimal

@@ -1,4 +1,4 @@
-//! Aggregation (PROTOCOL §1.4): task means with n and parse_fail, p50/p90, the original's
+//! Aggregation (docs/protocol.md#aggregation): task means with n and parse_fail, p50/p90, the original's
 //! micro means per scorer type and overall, rank means and the weighted headline S_open.
 
 use std::collections::BTreeMap;

@@ -1,4 +1,4 @@
-//! Weight calibration (PROTOCOL §1.4, paper appendix): Spearman correlations between tasks
+//! Weight calibration (docs/protocol.md#aggregation, paper appendix): Spearman correlations between tasks
 //! across models, redundancy loads L_i, uniqueness u_i = 1/L_i normalised within each rank
 //! and scaled by the rank budgets.
 

@@ -1,5 +1,6 @@
 //! `dh-benchmark`: the open-loop R1–R3 suite — task registry, record model, answer parsers,
-//! exact per-record scorers (PROTOCOL §1.2–1.3), aggregation and weight calibration (§1.4).
+//! exact per-record scorers (docs/protocol.md#answer-parsing, #record-scores), aggregation and
+//! weight calibration (#aggregation).
 //!
 //! The original scorer is Python; every parser here reproduces its behaviour including
 //! Python's Unicode classes, `json.loads` and `str()` (see [`pyunicode`] and [`pyjson`]).

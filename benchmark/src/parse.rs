@@ -1,4 +1,4 @@
-//! Answer parsers, exactly as the original scorer (PROTOCOL §1.2). Each mirrors one Python
+//! Answer parsers, exactly as the original scorer (docs/protocol.md#answer-parsing). Each mirrors one Python
 //! regex or helper; comments give the regex. Hand-written matchers keep Python's Unicode
 //! classes (`\s`, `\d`, `\b`) and leftmost-first semantics, and cannot panic.
 

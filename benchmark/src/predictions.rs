@@ -2,7 +2,7 @@
 //!
 //! Two line formats are read (a line of our runner carries both):
 //! - drivehierarchy: `{"id", "task", "prediction", "record", "model", ...}` — the ground truth
-//!   comes from the released `record` (its task's field, PROTOCOL §1);
+//!   comes from the released `record` (its task's field, docs/protocol.md#open-loop-tasks);
 //! - original: the original runner's `{"Question_id" (or "task_id"), "question",
 //!   "ground_truth", "model_prediction"[, "ground_truth_order"]}` — the ground truth is
 //!   `ground_truth` as written, which is what the original scorer reads.

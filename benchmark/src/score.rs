@@ -1,4 +1,4 @@
-//! Per-record scores s ∈ [0, 100] (PROTOCOL §1.3), exactly as the original scorer.
+//! Per-record scores s ∈ [0, 100] (docs/protocol.md#record-scores), exactly as the original scorer.
 
 use serde_json::Value;
 

@@ -1,5 +1,5 @@
 //! The 14 open-loop tasks: ids, release file stems, ranks, answer kinds, scorers and the
-//! frozen headline weights (paper Table 1, PROTOCOL §1.4).
+//! frozen headline weights (paper Table 1, docs/protocol.md#aggregation).
 
 use serde::{Deserialize, Serialize};
 

@@ -8,7 +8,7 @@
 //!
 //! A decision is an action array, or a raw VLM reply parsed by the caller (`Action::Reply`):
 //! a reply without a usable decision, or no reply at all, holds the previous control verbatim
-//! and counts as a parse failure (§2.3). Every decision is logged (`decision_log`).
+//! and counts as a parse failure (docs/protocol.md#r4-actuation). Every decision is logged (`decision_log`).
 
 use crate::drive::{
     decision_prompt, navigation_command, ActuationBridge, Command, Control, Decision, DecisionFailure,

@@ -20,7 +20,7 @@ pub enum ActorKind {
     StaticObject,
 }
 
-/// How a contact with the ego is classed by the protocol (§2.4).
+/// How a contact with the ego is classed by the protocol (docs/protocol.md#r4-termination).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ContactClass {

@@ -1,5 +1,5 @@
 #![no_main]
-//! VLM reply parser (PROTOCOL §2.3) and the actuation bridge it feeds: never panics, and any
+//! VLM reply parser (docs/protocol.md#r4-actuation) and the actuation bridge it feeds: never panics, and any
 //! parsed decision becomes a finite control within the actuator ranges.
 
 use dh_env::drive::bridge::ActuationBridge;

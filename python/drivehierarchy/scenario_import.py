@@ -8,7 +8,7 @@ editor's participant list (to catch actors the conversion lost), actor kinds and
 the editor's triggers, obstacles and light settings, which the original runtime ignores (so do
 we; the report says so).
 
-Mapping (PROTOCOL.md §2.6): hero → `[ego]`; `slave` vehicles → `[[traffic.vehicles]]` driven
+Mapping (docs/protocol.md#r4-categories): hero → `[ego]`; `slave` vehicles → `[[traffic.vehicles]]` driven
 by SUMO, departing at t = 0 from rest on their lane and position; pedestrians → scripted
 pedestrian actors walking point to point at each target point's speed (default 1.2 m/s).
 Positions come from the CARLA coordinates and the user's network offset (CARLA x = SUMO x −
@@ -43,7 +43,7 @@ from drivehierarchy._core import ConfigError, Network, OrientedBox, ScenarioErro
 if TYPE_CHECKING:
     from drivehierarchy._core import _Edge, _Lane
 
-# The original tongji network's offset (PROTOCOL.md §2.6), used when a file gives none.
+# The original tongji network's offset (docs/protocol.md#r4-categories), used when a file gives none.
 DEFAULT_NET_OFFSET = (761.28, 488.05)
 DEFAULT_PEDESTRIAN_SPEED_MPS = 1.2
 VTYPES_DEFAULT_NAME = "carlavtypes13.rou.xml"
@@ -109,7 +109,7 @@ def category_for(folder: str) -> str:
     if not m or f"{int(m.group(1)):02d}" not in CATEGORY_BY_NUMBER:
         raise ScenarioError(
             f"category folder {folder!r}: expected a name starting with a category number 01–10 "
-            f"(PROTOCOL §2.6), e.g. 01_pedestrain_recognition"
+            f"(docs/protocol.md#r4-categories), e.g. 01_pedestrain_recognition"
         )
     return CATEGORY_BY_NUMBER[f"{int(m.group(1)):02d}"]
 

@@ -236,7 +236,7 @@ fn openloop_frozen_weights() -> BTreeMap<&'static str, f64> {
     TASKS.iter().map(|t| (t.name, t.weight)).collect()
 }
 
-/// The calibration's defaults (PROTOCOL §1.4): λ_same, λ_cross, γ and the rank budgets.
+/// The calibration's defaults (docs/protocol.md#aggregation): λ_same, λ_cross, γ and the rank budgets.
 #[pyfunction]
 fn openloop_calibration_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
     let p = CalibrationParams::default();

@@ -1,5 +1,6 @@
 """`openloop score` on the original release's result folders (`<Task>_pred.jsonl`), checked
-against an independent Python port of the original formulas (PROTOCOL §1.2–1.3) on the
+against an independent Python port of the original formulas (docs/protocol.md#answer-parsing,
+#record-scores) on the
 released sample records; inputs with nothing to score fail loudly; our runner's lines carry
 the original's fields."""
 
@@ -21,7 +22,7 @@ from drivehierarchy.cli import main
 
 TASKS = {t["id"]: t for t in _core.openloop_tasks()}
 
-# --- an independent port of the original scorer's formulas (PROTOCOL §1.2–1.3) ----------------
+# --- an independent port of the original scorer's formulas (docs/protocol.md#record-scores) -------
 
 _NUM = re.compile(r"[-+]?(?:\d+\.\d+|\d+|\.\d+)(?:[eE][-+]?\d+)?")
 _LEAD = re.compile(r"^\s*[\"'\(\[\{]*\s*([A-Z])(?:\s*[\)\]\}\"'\.,:;-]|$)")
@@ -126,7 +127,7 @@ def _round_half_away(x: float) -> int:
 
 
 def port_score(scorer: str, gt: Any, pred: Any) -> tuple[float, bool]:
-    """(score, parsed) of one record, written from PROTOCOL §1.2–1.3."""
+    """(score, parsed) of one record, written from docs/protocol.md#answer-parsing, #record-scores."""
     if scorer == "yes_no":
         g, p = _yes_no(gt), _yes_no(pred)
         return (0.0, False) if g is None or p is None else (100.0 * (g == p), True)
@@ -247,7 +248,7 @@ def mixed_prediction(tid: str, raw: dict[str, Any]) -> str:
 
 
 def original_line(tid: str, raw: dict[str, Any], prediction: str) -> dict[str, Any]:
-    """A line as the original runner writes it (PROTOCOL §1, its output record)."""
+    """A line as the original runner writes it (docs/protocol.md#open-loop-tasks, its output record)."""
     id_key = next((k for k in ("Question_id", "task_id", "id") if k in raw), "id")
     rid = raw.get(id_key)
     line: dict[str, Any] = {"Question_id": None if rid is None else str(rid)}

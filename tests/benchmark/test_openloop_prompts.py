@@ -1,4 +1,5 @@
-"""Prompt strings of the original harness (PROTOCOL §1.1), pinned character for character."""
+"""Prompt strings of the original harness (docs/protocol.md#open-loop-prompting), pinned character
+for character."""
 
 from __future__ import annotations
 

@@ -1,6 +1,7 @@
 """Our R4 record against an independent port of the original scorer's arithmetic.
 
-The original (`SceneScoreTracker` of the release, PROTOCOL §2.5) updates once at t = 0 and after
+The original (`SceneScoreTracker` of the release, docs/protocol.md#r4-scene-score) updates once at
+t = 0 and after
 every tick, accounts each interval's off-road time by the sample that opens it, rounds every
 score with Python's `round`, composes `score_composed` from the rounded terms and decides the
 status by thresholds. This port is written from that description, in plain Python floats, and

@@ -36,7 +36,8 @@ TONGJI = f"{CLOSE_LOOP}/Carla_Simulation/Co-Simulation/Sumo/tongji"
 
 
 def test_carla_sumo_frames_follow_protocol() -> None:
-    # PROTOCOL §2.6: CARLA x = SUMO x − 761.28, CARLA y = 488.05 − SUMO y (a point of a real scene).
+    # docs/protocol.md#r4-categories: CARLA x = SUMO x − 761.28, CARLA y = 488.05 − SUMO y (a point
+    # of a real scene).
     assert carla_to_sumo(-716.3723579563067, 199.96828165326565) == pytest.approx(
         (44.90764204369327, 288.08171834673436)
     )

@@ -19,7 +19,7 @@ SHORT = [
     "09_yielding/town01_09_yield_left_turn.toml",
 ]
 
-# PROTOCOL §2.2, verbatim: the action question appended to the condition prefix.
+# docs/protocol.md#r4-prompt, verbatim: the action question appended to the condition prefix.
 ACTION_QUESTION = (
     "Your primary objective is to reach the destination in the minimum time while remaining safe and "
     "legal. Hard constraints: do not collide with vehicles, pedestrians, or static obstacles; do not "

@@ -1,4 +1,4 @@
-"""The decision message (PROTOCOL §2.1): layout, images, question text, controls, presets."""
+"""The decision message (docs/protocol.md#r4-loop): layout, images, question text, controls, presets."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 //! The expert on the project's R4 scenarios (`scenarios/r4/`), through the real world and the
 //! protocol's actuation bridge at 4 Hz (a decision at tick 0 and every 5 ticks, held between),
-//! scored per PROTOCOL.md §2.4–2.5. Each scenario must reach S_R4 ≥ 90.
+//! scored per docs/protocol.md#r4-termination, #r4-scene-score. Each scenario must reach S_R4 ≥ 90.
 //!
 //! `sumo:` maps need SUMO_HOME (the env var, else `python3 -c "import sumo"`); scenarios on them
 //! are skipped with a message when it is absent.

@@ -1,4 +1,4 @@
-//! Actuation bridge (PROTOCOL.md §2.3): a (steer, target speed) decision → pedal and steering
+//! Actuation bridge (docs/protocol.md#r4-actuation): a (steer, target speed) decision → pedal and steering
 //! commands, with the original's clipping, steering rate limit and launch floor.
 
 use serde::{Deserialize, Serialize};
@@ -117,7 +117,7 @@ impl ActuationBridge {
     }
 }
 
-/// (throttle, brake) for a target speed at ego speed `v`, per §2.3.
+/// (throttle, brake) for a target speed at ego speed `v`, per docs/protocol.md#r4-actuation.
 pub fn pedals(target_speed_mps: f64, v: f64) -> (f64, f64) {
     let target = clip(target_speed_mps, 0.0, MAX_TARGET_SPEED_MPS);
     let e = target - v;

@@ -1,4 +1,4 @@
-//! Navigation command (PROTOCOL.md §2.2), derived from the future route points alone.
+//! Navigation command (docs/protocol.md#r4-prompt), derived from the future route points alone.
 
 use serde::{Deserialize, Serialize};
 

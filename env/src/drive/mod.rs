@@ -1,4 +1,4 @@
-//! The agent-facing side of the R4 protocol (PROTOCOL.md §2.2–2.3): route tracking, the
+//! The agent-facing side of the R4 protocol (docs/protocol.md#r4-prompt, #r4-actuation): route tracking, the
 //! navigation command, the exact prompt text and the actuation bridge. Pure functions of the
 //! tick state; no world access.
 

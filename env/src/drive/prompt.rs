@@ -1,4 +1,4 @@
-//! The exact text sent to the VLM at each decision (PROTOCOL.md §2.2), original quirks kept.
+//! The exact text sent to the VLM at each decision (docs/protocol.md#r4-prompt), original quirks kept.
 
 use super::command::Command;
 use std::fmt::Write as _;

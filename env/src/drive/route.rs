@@ -1,4 +1,4 @@
-//! Route tracker (PROTOCOL.md §2.2): progress along the route, distance to go and the eight
+//! Route tracker (docs/protocol.md#r4-prompt): progress along the route, distance to go and the eight
 //! future route points in the ego frame.
 
 use crate::geom::{Polyline, Pose};

@@ -1,4 +1,4 @@
-//! Bird's-eye view (PROTOCOL §2.1): top-down, ego at the centre, ego forward = up, with the
+//! Bird's-eye view (docs/protocol.md#r4-loop): top-down, ego at the centre, ego forward = up, with the
 //! local route overlay drawn exactly as the original draws it (pixel sizes and colours): a
 //! (255, 90, 90) 3 px polyline from the ego centre through every vertex of the local route
 //! slice, a white dot with a 2 px (255, 90, 90) outline on every visible vertex (radius 4 px,

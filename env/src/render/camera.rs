@@ -38,7 +38,7 @@ pub struct CameraConfig {
 }
 
 impl Default for CameraConfig {
-    /// PROTOCOL §2.1 front camera: 800×450, FOV 100°, 1.5 m ahead, 2.4 m up, pitched 5° down.
+    /// docs/protocol.md#r4-loop front camera: 800×450, FOV 100°, 1.5 m ahead, 2.4 m up, pitched 5° down.
     fn default() -> Self {
         CameraConfig {
             width: 800,

@@ -9,7 +9,8 @@ use crate::view::ActorKind;
 /// Highest schema version this build reads.
 pub const SCENARIO_VERSION: u32 = 1;
 
-/// The ten R4 categories of PROTOCOL.md §2.6, as written in `category` and used as folder names.
+/// The ten R4 categories (docs/protocol.md#r4-categories), as written in `category` and used as
+/// folder names.
 pub const CATEGORIES: [&str; 10] = [
     "01_pedestrian",
     "02_obstacles",

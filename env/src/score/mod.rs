@@ -1,4 +1,5 @@
-//! Scoring of R4 runs (PROTOCOL.md §2.4–2.5): events, termination order and thresholds, the
+//! Scoring of R4 runs (docs/protocol.md#r4-termination, #r4-scene-score): events, termination
+//! order and thresholds, the
 //! route / safety / efficiency terms, the `scene_score.json` record, and re-scoring of a
 //! recorded run without the simulator.
 

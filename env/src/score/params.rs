@@ -1,4 +1,5 @@
-//! Every constant of the scene score (PROTOCOL.md §2.4–2.5); `Default` is the protocol.
+//! Every constant of the scene score (docs/protocol.md#r4-termination, #r4-scene-score);
+//! `Default` is the protocol.
 
 use serde::{Deserialize, Serialize};
 

@@ -1,5 +1,5 @@
 //! Per-tick score accumulator: travel, off-road time, route progress, events and termination
-//! (PROTOCOL.md §2.4–2.5).
+//! (docs/protocol.md#r4-termination, #r4-scene-score).
 //!
 //! It follows the original's `SceneScoreTracker` and runner loop, sample by sample. The state
 //! at t = 0 is sample 0 (given at construction); each tick adds one sample. Order inside one

@@ -1,5 +1,5 @@
-//! No `use` cycle between the modules of `env/src` (ARCHITECTURE.md: keep `env/` free of import
-//! circles; types two modules share get their own small module below both).
+//! No `use` cycle between the modules of `env/src` (docs/architecture.md#where-world: keep `env/`
+//! free of import circles; types two modules share get their own small module below both).
 //!
 //! Nodes: every top-level module (`geom`, `sim`, `world` = `world/mod.rs`) and every direct
 //! submodule (`scenario::schema`, `world::lights`, `map::route`); `crate` is `lib.rs`. Inline

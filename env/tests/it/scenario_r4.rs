@@ -117,7 +117,8 @@ fn zero_control_runs_and_is_deterministic() {
     }
 }
 
-/// Outcome of a drive by the test driver, scored by the protocol's tracker (§2.4–2.5).
+/// Outcome of a drive by the test driver, scored by the protocol's tracker
+/// (docs/protocol.md#r4-termination, #r4-scene-score).
 #[derive(Debug)]
 struct Outcome {
     reached: bool,
@@ -131,7 +132,8 @@ struct Outcome {
 const CLEARANCE_M: f64 = 0.6;
 
 /// `careful`: sees actors and lights. Decides every tick with direct pedals, or (with
-/// `bridge`) every 5 ticks through the protocol's actuation bridge (§2.3) like a policy does.
+/// `bridge`) every 5 ticks through the protocol's actuation bridge (docs/protocol.md#r4-actuation)
+/// like a policy does.
 fn drive(s: &ResolvedScenario, careful: bool, bridge: bool) -> Outcome {
     let mut act = ActuationBridge::new();
     let mut held = Control::default();

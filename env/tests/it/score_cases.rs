@@ -1,4 +1,5 @@
-//! Hand-computed scoring cases (PROTOCOL.md §2.4–2.5). Every expected number is derived in
+//! Hand-computed scoring cases (docs/protocol.md#r4-termination, #r4-scene-score). Every expected
+//! number is derived in
 //! the comment next to it.
 
 use dh_env::geom::{Polyline, Vec2};

@@ -29,7 +29,7 @@ _DEFAULT_ACTION_MODE: ActionMode = _rust_default("action_mode")
 
 @dataclass(frozen=True)
 class CameraConfig:
-    """Pinhole front camera; defaults are the protocol's (PROTOCOL §2.1)."""
+    """Pinhole front camera; defaults are the protocol's (docs/protocol.md#r4-loop)."""
 
     width: int = _rust_default("front", "width")
     height: int = _rust_default("front", "height")

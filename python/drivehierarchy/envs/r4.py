@@ -201,9 +201,10 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
     def step_reply(self, reply: str | None) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
         """One decision from a raw VLM reply (`None`: no reply at all, e.g. a transport error).
 
-        The reply is parsed in Rust by the protocol's parser (§2.3); when it yields no decision the
-        previous control is held verbatim (the steer rate-limit state untouched) and the failure is
-        counted in the score record's `parse_failures` and logged in `info["reply"]`.
+        The reply is parsed in Rust by the protocol's parser (docs/protocol.md#r4-actuation); when
+        it yields no decision the previous control is held verbatim (the steer rate-limit state
+        untouched) and the failure is counted in the score record's `parse_failures` and logged in
+        `info["reply"]`.
         """
         if self.config.action_mode != "decision":
             raise ConfigError(

@@ -10,7 +10,7 @@ most requests seen in flight at once.
         ...  # base_url == "http://127.0.0.1:<port>/v1"
 
 `route_driver` is a scripted closed-loop driver for R4: it reads the speed and the local route
-points from the protocol prompt (PROTOCOL §2.2) and answers `steer: ..\ntarget_speed_mps: ..`
+points from the protocol prompt (docs/protocol.md#r4-prompt) and answers `steer: ..\ntarget_speed_mps: ..`
 by pure pursuit, so `r4 evaluate --agent vlm` can drive real episodes against this server.
 `malformed_reply_rate` answers a well-formed completion whose text has no action in it.
 
@@ -117,7 +117,8 @@ MALFORMED_REPLY = "I would keep an eye on the road and drive carefully."
 
 
 def route_points(text: str) -> list[tuple[float, float]]:
-    """The (forward_m, right_m) route points of a §2.2 prompt; [] when there are none."""
+    """The (forward_m, right_m) route points of a decision prompt (docs/protocol.md#r4-prompt); []
+    when there are none."""
     m = _ROUTE_RE.search(text)
     if m is None:
         return []

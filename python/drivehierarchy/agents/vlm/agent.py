@@ -1,9 +1,10 @@
 """The VLM driver: builds the decision message, sends it, hands the raw reply to the env.
 
 Parsing is not done here: the env parses the raw reply in Rust (`dh_agents::vlm::parse_reply`,
-PROTOCOL §2.3) and holds the previous control when it is unparseable. A transport failure (timeout,
+docs/protocol.md#r4-actuation) and holds the previous control when it is unparseable. A transport
+failure (timeout,
 HTTP error, dropped connection, after the transport's retries) becomes `None` — "no decision" —
-which the env also holds and counts (§2.3 treats it as an unparseable reply).
+which the env also holds and counts (docs/protocol.md#r4-actuation treats it as an unparseable reply).
 
 `VLMDriver` is the async core the closed-loop harness shares across scenarios (one connection
 pool, many scenarios in flight); `VLMAgent` is the blocking `Agent` for `run_episode` and scripts.

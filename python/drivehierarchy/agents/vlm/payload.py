@@ -1,10 +1,10 @@
-"""The message one R4 decision sends to a VLM (PROTOCOL §2.1): one user turn, no history.
+"""The message one R4 decision sends to a VLM (docs/protocol.md#r4-loop): one user turn, no history.
 
 Laid out as the original's VLM service wraps it: a front-camera descriptor text, the front image,
-a BEV descriptor text, the BEV image, then `Q(frame {n}): ` + the §2.2 text the env produced
-(`obs["prompt"]`), n = 1, 2, … the decision count. The descriptor wording was not released; ours
-is one neutral line per image, naming what it shows (documented in docs/vlm.md). Images travel as
-base64 JPEG data URLs.
+a BEV descriptor text, the BEV image, then `Q(frame {n}): ` + the decision text the env produced
+(docs/protocol.md#r4-prompt, `obs["prompt"]`), n = 1, 2, … the decision count. The descriptor
+wording was not released; ours is one neutral line per image, naming what it shows (documented in
+docs/vlm.md). Images travel as base64 JPEG data URLs.
 
 Controls (ablations, docs/vlm.md): `blind` sends only the question text, `no_bev` drops the BEV
 descriptor and image, `max_images=1` (a model preset that takes one image) behaves like `no_bev`,

@@ -33,7 +33,7 @@ T = TypeVar("T")
 
 @dataclass(frozen=True)
 class DecodingConfig:
-    """Decoding settings of the original protocol (paper Table 9, PROTOCOL §1.1)."""
+    """Decoding settings of the original protocol (paper Table 9, docs/protocol.md#open-loop-prompting)."""
 
     temperature: float = 0.0
     top_p: float = 1.0

@@ -2,8 +2,9 @@
 
 SCORES.csv has a `model` column and one column per task id (`R1_1_A … R3_2`, any subset that
 covers every rank with a budget) holding task scores in 0–100; the report's `table1.csv` is one
-(its `avg_score` and rank columns are skipped). The weights follow PROTOCOL
-§1.4: Spearman ρ between tasks across models, L_i = 1 + λ_same Σ_same max(ρ,0)^γ + λ_cross
+(its `avg_score` and rank columns are skipped). The weights follow
+docs/protocol.md#aggregation: Spearman ρ between tasks across models, L_i = 1 + λ_same Σ_same
+max(ρ,0)^γ + λ_cross
 Σ_other max(ρ,0)^γ, u_i = 1/L_i normalised within the rank, times the rank budget. The
 arithmetic is in Rust (`dh-benchmark`).
 """
@@ -19,7 +20,7 @@ from typing import Any, NamedTuple
 
 from drivehierarchy import ConfigError, _core
 
-# PROTOCOL §1.4's λ_same, λ_cross, γ and rank budgets, as the Rust calibration defines them.
+# docs/protocol.md#aggregation's λ_same, λ_cross, γ and rank budgets, as the Rust calibration defines them.
 DEFAULTS: dict[str, Any] = dict(_core.openloop_calibration_defaults())
 DEFAULT_BUDGETS: dict[str, float] = dict(DEFAULTS["budgets"])
 TASK_IDS: tuple[str, ...] = tuple(t["id"] for t in _core.openloop_tasks())

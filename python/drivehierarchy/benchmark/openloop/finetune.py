@@ -30,7 +30,7 @@ from .report import Pool, read_scores_table, weighted_score
 read_pool_csv = read_scores_table
 
 AVG = "Avg.Score"
-# The protocol's number pattern (PROTOCOL §1.2), so "52.54 m" exports as "52.54".
+# The protocol's number pattern (docs/protocol.md#answer-parsing), so "52.54 m" exports as "52.54".
 _NUMBER_RE = re.compile(r"[-+]?(?:\d+\.\d+|\d+|\.\d+)(?:[eE][-+]?\d+)?")
 
 

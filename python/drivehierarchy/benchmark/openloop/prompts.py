@@ -1,4 +1,4 @@
-"""The original harness's prompting (PROTOCOL §1.1), reproduced exactly.
+"""The original harness's prompting (docs/protocol.md#open-loop-prompting), reproduced exactly.
 
 Chat = system message + one user message: all images first (labelled images preceded by the
 text `Image A`, ...), then the question text. Strings here are part of the protocol; unit tests

@@ -1,6 +1,7 @@
 """Typed view of the released open-loop records (R1–R3), read unchanged.
 
-The release's schemas differ per task (PROTOCOL §1): ids in `Question_id` or `task_id`, the
+The release's schemas differ per task (docs/protocol.md#open-loop-tasks): ids in `Question_id` or
+`task_id`, the
 target in `answer`, `ground_truth.bbox` or `ground_truth_order`, images in `image_path`,
 `image_paths` (or `meta_data.image_paths`) or labelled `images[]`. A `Record` keeps the original
 object untouched in `raw` and exposes the fields the runner, prompts and exports need.
@@ -58,7 +59,7 @@ TASK_KIND: dict[str, str] = {t[0]: t[2] for t in TASKS}
 TASK_RANK: dict[str, str] = {t[0]: t[3] for t in TASKS}
 RANKS: tuple[str, ...] = tuple(dict.fromkeys(t[3] for t in TASKS))
 
-# Frozen headline weights (paper Table 1, PROTOCOL §1.4).
+# Frozen headline weights (paper Table 1, docs/protocol.md#aggregation).
 FROZEN_WEIGHTS: dict[str, float] = dict(_core.openloop_frozen_weights())
 
 _TASK_ID_RE = re.compile(r"^(R\d_\d(?:_[A-Z](?=_|$))?)")

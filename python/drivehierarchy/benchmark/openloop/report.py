@@ -175,7 +175,7 @@ def weighted_rank_scores(
 ) -> dict[str, float | None]:
     """Σ_t∈r w_t S_t / Σ_t∈r w_t per rank: the rank score behind the paper's rank-level Spearman
     figure and its R4 correlations (with it the paper's ρ(R1,R2)=0.843, ρ(R1,R4)=0.664, ... are
-    reproduced from Tables 1–2; the plain means of PROTOCOL §1.4 give other values)."""
+    reproduced from Tables 1–2; the plain means of docs/protocol.md#aggregation give other values)."""
     out: dict[str, float | None] = {}
     for rank in RANKS:
         tasks = [t for t in TASK_IDS if TASK_RANK[t] == rank]

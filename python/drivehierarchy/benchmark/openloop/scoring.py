@@ -10,7 +10,8 @@ Two layouts are read, detected from the folder (or forced with `layout=`):
   "model_prediction"[, "ground_truth_order"]}`; every line counts, as in the original scorer.
 
 Our runner's lines carry both sets of fields. Every task is scored in Rust (one call per file;
-exact PROTOCOL §1.2–1.3 scorers, the original's formulas), the R1_4 judge runs when a model
+exact scorers of docs/protocol.md#answer-parsing and #record-scores, the original's formulas), the
+R1_4 judge runs when a model
 path is given (else R1_4 is `skipped` with the reason; `skip_l1_4` skips it as the original's
 `--skip-l1-4`), then aggregated and written:
 

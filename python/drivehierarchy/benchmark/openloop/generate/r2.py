@@ -1,4 +1,4 @@
-"""R2 task builders: multi-view and temporal memory, spatial relations (PROTOCOL §1, the
+"""R2 task builders: multi-view and temporal memory, spatial relations (docs/protocol.md#open-loop-tasks, the
 original release's R2 files).
 
 - R2_1: unique vehicles across the six surround cameras, each vehicle counted once;
