@@ -332,7 +332,14 @@ window.editor.triggerHandles = triggerHandles;
 function draw() {
   resizeCanvas();
   ctx.clearRect(0, 0, canvas.width, canvas.height);
-  if (!S.map) return;
+  if (!S.map) {
+    ctx.fillStyle = "#555";
+    ctx.font = "15px system-ui, sans-serif";
+    ctx.textAlign = "center";
+    ctx.fillText("Open a scenario file (the list at the top left), or pick a category and New.", canvas.width / 2, canvas.height / 2);
+    ctx.textAlign = "start";
+    return;
+  }
   ctx.lineCap = "round";
   ctx.lineJoin = "round";
   for (const j of S.map.junctions) {
