@@ -262,8 +262,8 @@ class Editor:
 
 # Errors collected per validation (each costs one more validation of the text).
 MAX_ERRORS = 20
-# How far from a path point a lane is looked for (farther: "over 30 m").
-OFF_ROAD_SEARCH_M = 30.0
+# How far from a path point a lane is looked for (farther: "over 200 m").
+OFF_ROAD_SEARCH_M = 200.0
 
 
 def _inside(field: str, outer: str) -> bool:

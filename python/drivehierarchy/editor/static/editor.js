@@ -98,6 +98,27 @@ async function setBuffer(d) {
   }
 }
 
+// Another buffer (opened or new): nothing of the one before stays on the page.
+function clearPreview() {
+  S.episode = null;
+  S.scene = null;
+  S.run = null;
+  previewSeq++;
+  for (const view of ["front", "bev"]) {
+    const img = $(view);
+    if (img.src) URL.revokeObjectURL(img.src);
+    img.removeAttribute("src");
+    delete img.dataset.time;
+    $(view + "-label").textContent = "";
+  }
+  $("time-end").textContent = "";
+  delete $("time-end").dataset.endS;
+  $("time-out").textContent = "–";
+  $("run-result").textContent = "";
+  $("probe-result").textContent = "";
+  drawTimeline();
+}
+
 function showPath() {
   $("path").textContent = S.path ? S.path + (S.dirty ? " *" : "") : "";
   document.title = (S.dirty ? "* " : "") + (S.path || "drivehierarchy scenario editor");
@@ -189,6 +210,7 @@ async function openFile(rel) {
   S.selected = null;
   S.scene = null;
   S.geo = null; // an invalid file draws nothing of the one before
+  clearPreview();
   S.undo = [];
   S.redo = [];
   updateUndo();
@@ -1521,7 +1543,7 @@ async function newScenario() {
   S.selected = null;
   S.scene = null;
   S.geo = null;
-  S.run = null;
+  clearPreview();
   S.undo = [];
   S.redo = [];
   updateUndo();
