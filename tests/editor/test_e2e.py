@@ -76,6 +76,33 @@ def server(workspace: Path) -> Iterator[str]:
         proc.wait(timeout=10)
 
 
+def _start_editor(args: list[str]) -> tuple[subprocess.Popen, str]:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "drivehierarchy.cli", "editor", *args, "--port", "0"],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert proc.stdout is not None
+    line = proc.stdout.readline()
+    m = re.search(r"(http://127\.0\.0\.1:\d+/)", line)
+    assert m, line
+    return proc, m.group(1)
+
+
+@pytest.fixture(scope="module")
+def category_server(workspace: Path) -> Iterator[str]:
+    """A second editor rooted at a category folder (a copy of one), started without --map."""
+    _need_browser()
+    root = workspace.parent / "category_root" / "01_pedestrian"
+    shutil.copytree(SUITE / "01_pedestrian", root)
+    proc, url = _start_editor([str(root)])
+    try:
+        yield url
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
 @pytest.fixture(scope="module")
 def browser(server: str):
     from playwright.sync_api import sync_playwright
@@ -817,3 +844,33 @@ def test_landing_page_favicon_zoom_scale_bar_and_undo(page, server: str) -> None
     page.keyboard.press("Control+Shift+Z")
     idle(page)
     assert page.evaluate("window.editor.S.text") == edited
+
+
+# Items 4 and 5, rooted at a category folder with no --map: New picks a built-in map (never
+# `map = ""`), and Save as's default path is inside the root, not `01_pedestrian/...` again.
+def test_new_in_a_category_root_without_a_default_map(page, category_server: str, workspace: Path) -> None:
+    page.goto(category_server)
+    idle(page)
+    maps = page.eval_on_selector_all("#new-map option", "els => els.map((e) => e.value)")
+    assert maps[0] == "" and all(m.startswith("builtin:") for m in maps[1:]) and "builtin:town01" in maps
+    page.fill("#new-id", "here")
+    page.select_option("#new-category", "01_pedestrian")
+    page.click("#btn-new")
+    idle(page)
+    assert page.input_value("#saveas-path") == "here.toml"
+    page.once("dialog", lambda d: d.accept())
+    page.select_option("#new-map", "builtin:town01")
+    page.click("#btn-new")
+    idle(page)
+    assert page.input_value("#saveas-path") == "here.toml"
+    assert 'map = "builtin:town01"' in page.evaluate("window.editor.S.text")
+    page.click("#tools button[data-mode=ego-start]")
+    click_lane(page, "C2T_1", 30.0)
+    page.click("#tools button[data-mode=ego-dest]")
+    click_lane(page, "C2T_1", 200.0)
+    assert page.is_hidden("#error-box"), page.inner_text("#error-box")
+    page.click("#btn-saveas")
+    idle(page)
+    assert page.inner_text("#status") == "saved here.toml"
+    root = workspace.parent / "category_root" / "01_pedestrian"
+    assert (root / "here.toml").is_file() and not (root / "01_pedestrian").exists()
