@@ -477,3 +477,14 @@ def test_drivers_by_the_probes_names(client) -> None:
 def test_favicon(client) -> None:
     r = client.get("/favicon.ico")
     assert r.status_code == 200 and r.headers["content-type"].startswith("image/svg")
+
+
+def test_an_error_caused_by_a_removed_key_is_not_reported() -> None:
+    from drivehierarchy.editor.app import _caused_by
+
+    rate = "traffic.flows[0].vehs_per_hour"
+    assert _caused_by("traffic.flows[0]", "give exactly one of vehs_per_hour and probability", rate)
+    assert _caused_by("actors[0]", "missing field `waypoints`", "actors[0].waypoints")
+    assert _caused_by("actors[0].start.of", "must be a place", "actors[0].start")
+    assert not _caused_by("actors[0]", "missing field `kind`", "actors[0].at_end")
+    assert not _caused_by("actors[1].speed_mps", "must be ≥ 0", "actors[0].speed_mps")

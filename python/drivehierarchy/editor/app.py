@@ -283,12 +283,13 @@ def _inside(field: str, outer: str) -> bool:
 def _caused_by(field: str, reason: str, removed: str) -> bool:
     """Whether an error found after removing `removed` may be that removal's consequence: an
     error at the removed key or inside it, or at a table around it whose reason names it
-    (`missing field `waypoints``; a `missing field `kind`` is not the removed `at_end`'s)."""
+    (`missing field `waypoints``, `give exactly one of vehs_per_hour and probability`; a
+    `missing field `kind`` is not the removed `at_end`'s)."""
     if _inside(field, removed):
         return True
     if _inside(removed, field):
         leaf = re.split(r"[.\[]", removed)[-1].rstrip("]")
-        return f"`{leaf}`" in reason
+        return re.search(rf"\b{re.escape(leaf)}\b", reason) is not None
     return False
 
 

@@ -74,6 +74,7 @@ async function setBuffer(d) {
     S.error = d.error;
     S.errors = d.errors || [d.error];
     S.warnings = [];
+    previewSeq++;
   }
   showPath();
   $("toml").value = S.text;
@@ -1344,10 +1345,11 @@ function driver() {
 
 // The chosen driver's episode of this text: the slider runs from its first decision to its
 // last, where a marker says how it ended.
-async function ensureEpisode() {
-  const key = S.text + "|" + driver();
+async function ensureEpisode(buf) {
+  buf = buf || buffer();
+  const key = buf.text + "|" + driver();
   if (S.episode && S.episode.key === key) return S.episode;
-  const ep = await api("/api/episode", { ...buffer(), driver: driver() });
+  const ep = await api("/api/episode", { ...buf, driver: driver() });
   if (S.text + "|" + driver() !== key) return S.episode; // edited meanwhile: the next preview asks
   S.episode = { ...ep, key };
   const slider = $("time");
@@ -1370,21 +1372,24 @@ let previewSeq = 0;
 async function preview() {
   if (S.error || !S.path) return;
   const seq = ++previewSeq;
+  // The buffer as it is now: an edit meanwhile schedules its own preview.
+  const buf = buffer();
   try {
-    await ensureEpisode();
-    if (seq !== previewSeq) return;
-    await showAt(Number($("time").value));
+    await ensureEpisode(buf);
+    if (seq !== previewSeq || buf.text !== S.text) return;
+    await showAt(Number($("time").value), buf);
   } catch (e) {
-    status("preview: " + e.message, "bad");
+    if (buf.text === S.text) status("preview: " + e.message, "bad");
   }
 }
 
 // The scene, front camera and BEV at time t, driven by the chosen driver; every label shows
 // the time of the decision it was taken at.
-async function showAt(t) {
-  const body = { ...buffer(), time_s: t, driver: driver() };
+async function showAt(t, buf) {
+  const body = { ...(buf || buffer()), time_s: t, driver: driver() };
   const [scene, front, bev] = await Promise.all([api("/api/scene", body),
     api("/api/frame", { ...body, view: "front" }), api("/api/frame", { ...body, view: "bev" })]);
+  if (body.text !== S.text) return; // edited meanwhile: not this buffer's scene
   S.scene = scene;
   $("time-out").textContent = scene.time_s.toFixed(2);
   draw();
