@@ -40,13 +40,10 @@ def main() -> int:
             browser = pw.chromium.launch(executable_path=args.chromium, args=["--no-sandbox"])
             page = browser.new_page(viewport={"width": 1700, "height": 1000})
             idle = "document.body.dataset.ready === '1' && document.body.dataset.busy === '0'"
+            # Opens zoomed to the scenario's route.
             page.goto(url + "#" + SCENARIO)
             page.wait_for_function(idle)
-            # Zoom onto the scenario's stretch of road.
-            page.evaluate(
-                """() => { const S = window.editor.S; S.view.scale = 4.5;
-                S.view.ox = 20; S.view.oy = 60; }"""
-            )
+            page.wait_for_function("window.editor.episodeReady()")
             set_time = "(el) => { el.value = '14'; el.dispatchEvent(new Event('input')); }"
             page.eval_on_selector("#time", set_time)
             page.wait_for_function("Number(document.getElementById('front').dataset.time) > 13.7")
@@ -54,13 +51,33 @@ def main() -> int:
             page.click("#btn-run")
             page.wait_for_function(idle)
             page.screenshot(path=str(args.out / "editor_overview.png"))
-            page.fill("[data-path='actors.0.speed_mps']", "-1")
-            page.press("[data-path='actors.0.speed_mps']", "Tab")
+            # The blind follower's own episode: the slider ends at its crash.
+            page.select_option("#driver", "follower@8")
+            page.wait_for_function("window.editor.episodeReady()")
+            end = "(el) => { el.value = el.max; el.dispatchEvent(new Event('input')); }"
+            page.eval_on_selector("#time", end)
+            page.wait_for_function(
+                "Number(document.getElementById('front').dataset.time) "
+                "=== Number(document.getElementById('time').max)"
+            )
             page.wait_for_function(idle)
+            page.locator("#preview").screenshot(path=str(args.out / "editor_driver_end.png"))
+            page.select_option("#driver", "expert")
+            page.wait_for_function(idle)
+            # Two errors at once, each at its field.
+            for path, value in (("actors.0.speed_mps", "-1"), ("actors.0.accel_mps2", "-2")):
+                page.fill(f"[data-path='{path}']", value)
+                page.press(f"[data-path='{path}']", "Tab")
+                page.wait_for_function(idle)
             page.locator("fieldset[data-actor='0']").screenshot(path=str(args.out / "editor_validation.png"))
+            # A refused Save as: the reason at the field and in the status line.
+            page.fill("#saveas-path", "../elsewhere.toml")
+            page.click("#btn-saveas")
+            page.wait_for_function(idle)
+            page.locator("header").screenshot(path=str(args.out / "editor_refused_save.png"))
             # Lights over time and background traffic: a scenario with flows through light C.
-            page.goto(url + "#" + TRAFFIC)
-            page.reload()
+            page.once("dialog", lambda d: d.accept())  # the unsaved edits above are discarded
+            page.select_option("#file-list", TRAFFIC)
             page.wait_for_function(idle)
             page.eval_on_selector("#time", set_time)
             page.wait_for_function("Number(document.getElementById('front').dataset.time) > 13.7")

@@ -230,6 +230,8 @@ fn scenario_json(s: &ResolvedScenario) -> Value {
             json!({
                 "name": a.name, "kind": a.kind, "length_m": a.length_m, "width_m": a.width_m,
                 "color": a.color, "motion": motion,
+                // The class whose lanes the actor keeps to (the editor's off-road warning).
+                "vclass": dh_env::scenario::vclass_of(a.kind).sumo_name(),
             })
         })
         .collect();

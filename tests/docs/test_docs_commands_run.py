@@ -182,7 +182,7 @@ def _folder(base: Path, official: Path) -> Path:
     for name in MINI:
         _link(scen / "r4" / name, base / "mini" / name)
     _link(scen / "r4" / MINI[0], base / "mini1" / MINI[0])
-    _link(scen / "maps", base / "maps")  # the suite's files name their maps as ../../maps/...
+    _link(scen / "maps", base / "maps")
     docs = base / "docs"
     docs.mkdir()
     for name in ("suite.md", "suite_probe.csv"):

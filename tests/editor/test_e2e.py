@@ -76,6 +76,33 @@ def server(workspace: Path) -> Iterator[str]:
         proc.wait(timeout=10)
 
 
+def _start_editor(args: list[str]) -> tuple[subprocess.Popen, str]:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "drivehierarchy.cli", "editor", *args, "--port", "0"],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert proc.stdout is not None
+    line = proc.stdout.readline()
+    m = re.search(r"(http://127\.0\.0\.1:\d+/)", line)
+    assert m, line
+    return proc, m.group(1)
+
+
+@pytest.fixture(scope="module")
+def category_server(workspace: Path) -> Iterator[str]:
+    """A second editor rooted at a category folder (a copy of one), started without --map."""
+    _need_browser()
+    root = workspace.parent / "category_root" / "01_pedestrian"
+    shutil.copytree(SUITE / "01_pedestrian", root)
+    proc, url = _start_editor([str(root)])
+    try:
+        yield url
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
 @pytest.fixture(scope="module")
 def browser(server: str):
     from playwright.sync_api import sync_playwright
@@ -86,15 +113,38 @@ def browser(server: str):
         b.close()
 
 
+# Console errors a test provokes on purpose: the browser logs every refused request
+# ("Failed to load resource: ... status of 403") as one. Keyed by page; (status, url suffix).
+EXPECTED_REFUSALS: dict[int, list[tuple[int, str]]] = {}
+
+
+def expect_refusal(page, status: int, url_suffix: str) -> None:
+    EXPECTED_REFUSALS.setdefault(id(page), []).append((status, url_suffix))
+
+
 @pytest.fixture
 def page(browser, server: str):
+    """A page that fails its test on any page error (an unhandled promise included) and any
+    console error, except the refusals the test said it provokes."""
     ctx = browser.new_context(viewport={"width": 1700, "height": 1000})
     p = ctx.new_page()
     errors: list[str] = []
+    console: list[tuple[str, str]] = []
     p.on("pageerror", lambda e: errors.append(str(e)))
+    p.on(
+        "console",
+        lambda m: console.append((m.text, m.location.get("url", ""))) if m.type == "error" else None,
+    )
     yield p
     ctx.close()
+    expected = EXPECTED_REFUSALS.pop(id(p), [])
+    unexpected = [
+        (text, url)
+        for text, url in console
+        if not any(f"status of {st} " in text and url.split("?")[0].endswith(sfx) for st, sfx in expected)
+    ]
     assert not errors, errors
+    assert not unexpected, unexpected
 
 
 def idle(page) -> None:
@@ -142,6 +192,13 @@ def changed_lines(before: str, after: str) -> list[tuple[str, str]]:
 
 def click_lane(page, lane: str, s: float) -> None:
     x, y = page.evaluate(LANE_POINT_JS, [lane, s])
+    box = page.locator("#map").bounding_box()
+    if not (
+        box["x"] + 5 < x < box["x"] + box["width"] - 5 and box["y"] + 5 < y < box["y"] + box["height"] - 5
+    ):
+        # Outside the view zoomed to the route: the whole map first.
+        page.click("#btn-fit-map")
+        x, y = page.evaluate(LANE_POINT_JS, [lane, s])
     page.mouse.click(x, y)
     idle(page)
 
@@ -151,7 +208,7 @@ def test_build_a_pedestrian_crossing_from_an_empty_map(page, server: str, worksp
     idle(page)
     page.fill("#new-id", "my_crossing")
     page.select_option("#new-category", "01_pedestrian")
-    page.check("#new-blank")
+    page.select_option("#new-map", "builtin:town01")
     page.click("#btn-new")
     idle(page)
     # Zoom on the straight so a click is well within a lane.
@@ -248,10 +305,12 @@ def test_preview_front_equals_scenario_preview_byte_for_byte(
 ) -> None:
     page.goto(server + "#" + PED)
     idle(page)
+    page.wait_for_function("window.editor.episodeReady()")
     page.eval_on_selector("#time", "(el) => { el.value = '12'; el.dispatchEvent(new Event('input')); }")
     # The scene at the last decision at or before t = 12 s (decisions are 0.25 s apart).
     page.wait_for_function("Number(document.getElementById('front').dataset.time) > 11.7")
     idle(page)
+    t = 12.0
     data = page.evaluate(
         """async () => {
         const r = await fetch(document.getElementById('front').src);
@@ -270,7 +329,7 @@ def test_preview_front_equals_scenario_preview_byte_for_byte(
             "preview",
             str(workspace / "r4" / PED),
             "--time",
-            "12",
+            str(t),
             "--out",
             str(tmp_path),
         ],
@@ -345,6 +404,7 @@ def test_invalid_row_value_shows_the_validators_message_at_that_rows_field(page,
     ), err.inner_text()
     # Only that row's field is marked; Save refuses the buffer.
     assert page.locator(".invalid").count() == 1
+    expect_refusal(page, 422, "/api/save")
     page.click("#btn-save")
     idle(page)
     assert "not saved" in page.inner_text("#status")
@@ -407,21 +467,23 @@ def test_phase_timeline_now_marker_follows_the_slider(page, server: str) -> None
     set_field(page, "lights.0.phases.1.state", "G" * n)
     set_field(page, "lights.0.phases.1.duration_s", "5")
     assert page.is_hidden("#error-box"), page.inner_text("#error-box")
-    tmax = float(page.get_attribute("#time", "max"))
     marker = ".timeline-strip[data-tls='C'] .now"
     text = ".now-text[data-tls='C']"
 
-    def slide(t: float) -> None:
+    def slide(t: float) -> float:
         page.eval_on_selector(
             "#time", f"(el) => {{ el.value = '{t}'; el.dispatchEvent(new Event('input')); }}"
         )
         # The scene is the world at the last decision at or before t.
         page.wait_for_function(f"Math.abs((window.editor.S.scene || {{time_s: -1}}).time_s - {t}) < 0.3")
         idle(page)
+        return float(page.input_value("#time"))
 
+    page.wait_for_function("window.editor.episodeReady()")
+    tmax = float(page.get_attribute("#time", "max"))
     lefts = []
-    for t, phase, color in [(2.0, 0, "red"), (7.0, 1, "green"), (12.0, 0, "red")]:
-        slide(t)
+    for want, phase, color in [(2.0, 0, "red"), (7.0, 1, "green"), (12.0, 0, "red")]:
+        t = slide(want)
         left = page.eval_on_selector(marker, "(el) => el.style.left")
         assert float(left.rstrip("%")) == pytest.approx(100 * t / tmax, abs=1e-3)
         lefts.append(page.eval_on_selector(marker, "(el) => el.getBoundingClientRect().left"))
@@ -473,3 +535,342 @@ def test_pace_and_lane_change_rows_are_added_edited_and_removed(page, server: st
     page.click(f"{van} .pace button.del")
     idle(page)
     assert page.evaluate("window.editor.S.text") == text
+
+
+def slide_to(page, t: float) -> float:
+    """Moves the time slider to t; the time of the decision shown (the last at or before t)."""
+    page.eval_on_selector("#time", f"(el) => {{ el.value = '{t}'; el.dispatchEvent(new Event('input')); }}")
+    page.wait_for_function(
+        f"""(() => {{ const f = Number(document.getElementById('front').dataset.time);
+        return f <= {t} + 1e-6 && f > {t} - 0.26 && window.editor.S.scene
+          && Math.abs(window.editor.S.scene.time_s - f) < 0.006; }})()"""
+    )
+    idle(page)
+    return page.evaluate("window.editor.S.scene.time_s")
+
+
+# Issue 31, item 1: a refused Save / Save as shows the server's reason in the status line and at
+# the path field; no unhandled promise (the page fixture fails on any page or console error).
+def test_refused_save_as_shows_the_reason(page, server: str) -> None:
+    page.goto(server + "#" + PED)
+    idle(page)
+    for path, status, reason in [
+        ("../outside.toml", 403, "`..` is refused"),
+        ("/tmp/abs.toml", 403, "absolute paths are refused"),
+        (PED, 400, "exists already"),
+    ]:
+        expect_refusal(page, status, "/api/save")
+        page.fill("#saveas-path", path)
+        page.click("#btn-saveas")
+        idle(page)
+        assert reason in page.inner_text("#status"), page.inner_text("#status")
+        assert page.inner_text("#status").startswith("not saved")
+        assert reason in page.inner_text("#save-error")
+        assert page.locator("#saveas-path.invalid-input").count() == 1
+
+
+# Item 2: unsaved edits are confirmed away (another file, New) and guarded on reload / close.
+def test_unsaved_edits_ask_before_they_are_lost(page, server: str) -> None:
+    page.goto(server + "#" + PED)
+    idle(page)
+    set_field(page, "actors.0.speed_mps", "1.3")
+    assert page.inner_text("#path").endswith("*")
+    asked: list[str] = []
+
+    def answer(accept: bool):
+        def handler(d) -> None:
+            asked.append(d.type + ": " + d.message)
+            d.accept() if accept else d.dismiss()
+
+        return handler
+
+    other = "01_pedestrian/town01_03_child_between_parked_cars.toml"
+    page.once("dialog", answer(False))
+    page.select_option("#file-list", other)
+    idle(page)
+    assert asked and asked[0].startswith("confirm: ") and "unsaved changes" in asked[0]
+    assert page.evaluate("window.editor.S.path") == PED and page.input_value("#file-list") == PED
+    assert "speed_mps = 1.3" in page.evaluate("window.editor.S.text")
+    page.once("dialog", answer(False))
+    page.click("#btn-new")
+    idle(page)
+    assert len(asked) == 2 and page.evaluate("window.editor.S.path") == PED
+    # Closing (or reloading) the page asks too: the browser's own beforeunload dialog.
+    with page.expect_event("dialog") as dialog:
+        page.close(run_before_unload=True)
+    assert dialog.value.type == "beforeunload"
+    dialog.value.accept()
+
+
+def test_an_unchanged_file_opens_another_without_asking(page, server: str) -> None:
+    page.goto(server + "#" + PED)
+    idle(page)
+    asked: list[str] = []
+    page.on("dialog", lambda d: (asked.append(d.type), d.dismiss()))
+    other = "01_pedestrian/town01_03_child_between_parked_cars.toml"
+    page.select_option("#file-list", other)
+    idle(page)
+    assert page.evaluate("window.editor.S.path") == other and not asked
+
+
+# Item 3: a category folder copied anywhere opens and runs with no edit (its files name their
+# maps `builtin:NAME`; here the copy sits a folder deeper than the suite, so no `../../maps`).
+def test_a_copied_category_folder_opens_and_runs(page, server: str, workspace: Path) -> None:
+    dest = workspace / "r4" / "copies" / "mine"
+    shutil.copytree(SUITE / "01_pedestrian", dest)
+    try:
+        page.goto(server)
+        idle(page)
+        rel = "copies/mine/" + PED.split("/")[1]
+        page.select_option("#file-list", rel)
+        idle(page)
+        assert page.evaluate("window.editor.S.error") is None
+        assert page.evaluate("window.editor.S.map.lanes.length") > 100
+        page.wait_for_function("window.editor.episodeReady()")
+        page.wait_for_function("document.getElementById('front').naturalWidth === 800")
+        page.select_option("#driver", "expert")
+        page.click("#btn-run")
+        idle(page)
+        assert "destination_reached" in page.inner_text("#run-score")
+    finally:
+        shutil.rmtree(workspace / "r4" / "copies")
+
+
+# Items 4 and 12: New offers the built-in maps (no `map = ""`), and a template's description
+# and (when asked) actors are not copied.
+def test_new_from_a_map_or_a_template(page, server: str) -> None:
+    page.goto(server)
+    idle(page)
+    maps = page.eval_on_selector_all("#new-map option", "els => els.map((e) => e.value)")
+    assert {"builtin:town01", "builtin:town02"} <= set(maps)
+    page.fill("#new-id", "on_town02")
+    page.select_option("#new-category", "01_pedestrian")
+    page.select_option("#new-map", "builtin:town02")
+    page.click("#btn-new")
+    idle(page)
+    assert 'map = "builtin:town02"' in page.evaluate("window.editor.S.text")
+    assert page.input_value("#saveas-path") == "01_pedestrian/on_town02.toml"
+    page.select_option("#new-map", "")
+    page.once("dialog", lambda d: d.accept())  # the unsaved new scenario
+    page.uncheck("#new-actors")
+    page.fill("#new-id", "no_actors")
+    page.click("#btn-new")
+    idle(page)
+    doc = page.evaluate("window.editor.S.doc")
+    assert doc["description"] == "" and "actors" not in doc and doc["id"] == "no_actors"
+    assert page.input_value("[data-path='description']") == ""
+    page.once("dialog", lambda d: d.accept())
+    page.check("#new-actors")
+    page.click("#btn-new")
+    idle(page)
+    doc = page.evaluate("window.editor.S.doc")
+    assert doc["description"] == "" and len(doc["actors"]) >= 1
+
+
+# Item 6: the status follows the buffer: after a save, an invalid "Apply text" says invalid.
+def test_status_follows_the_buffer(page, server: str, workspace: Path) -> None:
+    path = workspace / "r4" / PED
+    before = path.read_text(encoding="utf-8")
+    page.goto(server + "#" + PED)
+    idle(page)
+    page.click("#btn-save")
+    idle(page)
+    assert page.inner_text("#status").startswith("saved")
+    page.click("#toml-box summary")
+    page.fill("#toml", before.replace("speed_mps = 1.1", "speed_mps = -1.1", 1))
+    page.click("#btn-apply-text")
+    idle(page)
+    assert page.inner_text("#status") == "text applied: invalid, 1 error (see the fields)"
+    assert page.locator(".field.invalid[data-field='actors.0.speed_mps']").count() == 1
+    assert path.read_text(encoding="utf-8") == before
+
+
+# Item 7: every error of the buffer at its field.
+def test_every_error_is_shown_at_its_field(page, server: str) -> None:
+    page.goto(server + "#" + PED)
+    idle(page)
+    text = page.evaluate("window.editor.S.text")
+    bad = text.replace("speed_mps = 1.1", "speed_mps = -1.1", 1).replace(
+        "speed_mps = 1.2", "speed_mps = -1.2", 1
+    )
+    bad = re.sub(r"reference_duration_s = [\d.]+", "reference_duration_s = -3.0", bad, count=1)
+    page.click("#toml-box summary")
+    page.fill("#toml", bad)
+    page.click("#btn-apply-text")
+    idle(page)
+    for f in ("actors.0.speed_mps", "actors.1.speed_mps", "reference_duration_s"):
+        err = page.locator(f".field.invalid[data-field='{f}'] .field-error")
+        assert err.count() == 1, f
+    assert page.locator("#error-box .error-line").count() == 3
+    assert "3 errors" in page.inner_text("#status")
+
+
+# Item 8: an off-road path is a warning, at its field, and the file still saves.
+def test_an_off_road_path_warns_without_refusing(page, server: str, workspace: Path) -> None:
+    page.goto(server + "#" + PED)
+    idle(page)
+    text = page.evaluate("window.editor.S.text")
+    off = text.replace('{ lane = "T2C_0", s = 242.4 }', "{ x = 60.0, y = 60.0 }", 1)
+    assert off != text
+    page.click("#toml-box summary")
+    page.fill("#toml", off)
+    page.click("#btn-apply-text")
+    idle(page)
+    assert page.is_hidden("#error-box")
+    assert "1 warning" in page.inner_text("#status")
+    w = page.locator("[data-rows='actors.0.waypoints'] .field-warning, .field.warned .field-warning")
+    assert w.count() >= 1 and "open to pedestrian" in w.first.inner_text()
+    page.fill("#saveas-path", "01_pedestrian/off_road.toml")
+    page.click("#btn-saveas")
+    idle(page)
+    assert page.inner_text("#status").startswith("saved")
+    (workspace / "r4" / "01_pedestrian" / "off_road.toml").unlink()
+
+
+# Items 9 and 10: the previews follow the chosen driver; the slider ends where its episode
+# ended, with a marker; every label shows its frame's own time; Play animates the images.
+def test_previews_follow_the_driver_and_its_episode(page, server: str) -> None:
+    page.goto(server + "#" + PED)
+    idle(page)
+    page.wait_for_function("window.editor.episodeReady()")
+    expert_end = float(page.get_attribute("#time", "max"))
+    assert "expert ends at" in page.inner_text("#time-end") and "destination_reached" in page.inner_text(
+        "#time-end"
+    )
+    page.select_option("#driver", "follower@8")
+    page.wait_for_function("window.editor.episodeReady()")
+    idle(page)
+    end = float(page.get_attribute("#time", "max"))
+    assert end < expert_end
+    marker = page.inner_text("#time-end")
+    assert f"follower@8 ends at {end:.2f} s" in marker and "collision" in marker, marker
+    # The slider starts at the episode's first decision: the label there is that frame's time.
+    t0 = float(page.get_attribute("#time", "min"))
+    v = slide_to(page, t0)
+    assert page.inner_text("#time-out") == f"{v:.2f}"
+    assert page.get_attribute("#front", "data-driver") == "follower@8"
+    assert page.inner_text("#front-label").endswith(f"t = {v:.2f} s")
+    # At the end: the follower's own frame at the crash (not the expert's).
+    v = slide_to(page, end)
+    assert v == pytest.approx(end) and page.inner_text("#time-out") == f"{end:.2f}"
+    assert "follower@8" in page.inner_text("#bev-label")
+    # Play: the images change with the map, frame by frame.
+    slide_to(page, t0)
+    seen: list[str] = page.evaluate(
+        """() => new Promise((resolve) => {
+        const times = [];
+        const img = document.getElementById('front');
+        const obs = new MutationObserver(() => times.push(img.dataset.time));
+        obs.observe(img, { attributes: true, attributeFilter: ['data-time'] });
+        document.getElementById('btn-play').click();
+        const wait = () => document.getElementById('btn-play').textContent === 'Play' && times.length
+          ? (obs.disconnect(), resolve(times)) : setTimeout(wait, 50);
+        setTimeout(wait, 50);
+      })"""
+    )
+    assert len(set(seen)) > 10 and float(seen[-1]) == pytest.approx(end), seen[-3:]
+
+
+# Item 11: the editor's driver names are `r4 run --agent` names; the scores agree.
+def test_the_editors_run_is_reproduced_by_r4_run(page, server: str, workspace: Path, tmp_path: Path) -> None:
+    page.goto(server + "#" + PED)
+    idle(page)
+    page.select_option("#driver", "follower@8")
+    page.click("#btn-run")
+    idle(page)
+    shown = page.inner_text("#run-score")
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "drivehierarchy.cli",
+            "r4",
+            "run",
+            "--agent",
+            "follower@8",
+            "--scenario",
+            str(workspace / "r4" / PED),
+            "--seed",
+            "0",
+            "--out",
+            str(tmp_path),
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    import json
+
+    rec = json.loads(r.stdout)
+    assert f"follower@8: S_R4 {rec['score_composed']:.1f}, {rec['termination_reason']}" in shown, (shown, rec)
+
+
+# Item 12: no broken images or empty panels before a file is open; a favicon; zoom to the
+# route with a scale bar; undo / redo of form edits.
+def test_landing_page_favicon_zoom_scale_bar_and_undo(page, server: str) -> None:
+    page.goto(server)
+    idle(page)
+    broken = page.eval_on_selector_all(
+        "img", "els => els.filter((e) => e.offsetParent !== null && !e.naturalWidth).length"
+    )
+    assert broken == 0
+    assert page.is_visible("#preview .placeholder") and not page.is_visible("#run")
+    assert page.get_attribute("link[rel=icon]", "href") == "/static/favicon.svg"
+    page.goto(server + "#" + PED)
+    idle(page)
+    # Zoomed to the route: its ends are inside the canvas, and much larger than the whole town.
+    scale = page.evaluate("window.editor.S.view.scale")
+    page.click("#btn-fit-map")
+    whole = page.evaluate("window.editor.S.view.scale")
+    assert scale > 1.5 * whole
+    page.click("#btn-fit-route")
+    m = float(page.get_attribute("#map", "data-scale-m"))
+    px = float(page.get_attribute("#map", "data-scale-px"))
+    assert m in {1, 2, 5, 10, 20, 50, 100, 200, 500, 1000} and px == pytest.approx(m * scale, rel=1e-3)
+    text = page.evaluate("window.editor.S.text")
+    set_field(page, "actors.0.speed_mps", "1.3")
+    set_field(page, "actors.1.speed_mps", "0.9")
+    edited = page.evaluate("window.editor.S.text")
+    page.click("#btn-undo")
+    idle(page)
+    page.click("#btn-undo")
+    idle(page)
+    assert page.evaluate("window.editor.S.text") == text
+    assert page.input_value("[data-path='actors.0.speed_mps']") == "1.1"
+    assert page.is_disabled("#btn-undo")
+    page.click("#btn-redo")
+    idle(page)
+    page.keyboard.press("Control+Shift+Z")
+    idle(page)
+    assert page.evaluate("window.editor.S.text") == edited
+
+
+# Items 4 and 5, rooted at a category folder with no --map: New picks a built-in map (never
+# `map = ""`), and Save as's default path is inside the root, not `01_pedestrian/...` again.
+def test_new_in_a_category_root_without_a_default_map(page, category_server: str, workspace: Path) -> None:
+    page.goto(category_server)
+    idle(page)
+    maps = page.eval_on_selector_all("#new-map option", "els => els.map((e) => e.value)")
+    assert maps[0] == "" and all(m.startswith("builtin:") for m in maps[1:]) and "builtin:town01" in maps
+    page.fill("#new-id", "here")
+    page.select_option("#new-category", "01_pedestrian")
+    page.click("#btn-new")
+    idle(page)
+    assert page.input_value("#saveas-path") == "here.toml"
+    page.once("dialog", lambda d: d.accept())
+    page.select_option("#new-map", "builtin:town01")
+    page.click("#btn-new")
+    idle(page)
+    assert page.input_value("#saveas-path") == "here.toml"
+    assert 'map = "builtin:town01"' in page.evaluate("window.editor.S.text")
+    page.click("#tools button[data-mode=ego-start]")
+    click_lane(page, "C2T_1", 30.0)
+    page.click("#tools button[data-mode=ego-dest]")
+    click_lane(page, "C2T_1", 200.0)
+    assert page.is_hidden("#error-box"), page.inner_text("#error-box")
+    page.click("#btn-saveas")
+    idle(page)
+    assert page.inner_text("#status") == "saved here.toml"
+    root = workspace.parent / "category_root" / "01_pedestrian"
+    assert (root / "here.toml").is_file() and not (root / "01_pedestrian").exists()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -359,3 +360,131 @@ def test_an_edited_buffer_starts_driving_before_its_preview_is_asked(client) -> 
         stop.set()
         ed.wake.set()
         worker.join(timeout=60)
+
+
+def test_suite_files_name_builtin_maps_and_a_copied_folder_validates(tmp_path: Path) -> None:
+    """Every suite file on a shipped map names it `builtin:NAME`, so a category folder copied
+    anywhere resolves; an old relative path to a shipped map gets an error that offers the fix."""
+    import shutil
+
+    from drivehierarchy import _core
+    from drivehierarchy.scenarios import sumo_home
+
+    paths = sorted(SUITE.glob("*/*.toml"))
+    assert len(paths) == 100
+    for p in paths:
+        (line,) = [ln for ln in p.read_text(encoding="utf-8").splitlines() if ln.startswith("map = ")]
+        assert re.match(r'map = "(builtin:[a-z0-9_]+|sumo:[^"]+)"', line), (p, line)
+    mine = tmp_path / "mine"
+    shutil.copytree(SUITE / "01_pedestrian", mine)
+    for p in sorted(mine.glob("town01_*.toml")):
+        _core.scenario_geometry(str(p), p.read_text(encoding="utf-8"), sumo_home())
+    old = (mine / PED.split("/")[1]).read_text(encoding="utf-8")
+    old = old.replace('map = "builtin:town01"', 'map = "../../maps/town01/town01.net.xml"')
+    with pytest.raises(Exception) as exc:
+        _core.scenario_geometry(str(mine / "old.toml"), old, sumo_home())
+    msg = str(exc.value)
+    assert "field `map` = ../../maps/town01/town01.net.xml: map file not found" in msg, msg
+    assert 'write map = "builtin:town01" to use it from any folder' in msg, msg
+
+
+def test_every_error_of_a_buffer_is_reported_at_its_field(client) -> None:
+    """The validator stops at its first error; the editor reports each independent one."""
+    text = client.get("/api/file", params={"path": PED}).json()["text"]
+    bad = text.replace("speed_mps = 1.1", "speed_mps = -1.1", 1)
+    assert bad != text
+    bad = bad.replace('kind = "pedestrian"', 'kind = "pedestrian"\nat_end = "vanish"', 1)
+    bad = re.sub(r"reference_duration_s = [\d.]+", "reference_duration_s = -3.0", bad, count=1)
+    d = client.post("/api/validate", json={"path": PED, "text": bad}, headers=ORIGIN).json()
+    assert not d["ok"]
+    fields = [e["field"] for e in d["errors"]]
+    assert set(fields) == {"reference_duration_s", "actors[0].speed_mps", "actors[0].at_end"}, d["errors"]
+    assert d["error"] == d["errors"][0]
+    # Each message's line is the line of the text as written.
+    lines = bad.splitlines()
+    for e in d["errors"]:
+        key = e["field"].rsplit(".", 1)[-1]
+        assert lines[e["line"] - 1].startswith(key), (e, lines[e["line"] - 1])
+    # An error of a whole row (a required key left out names its table) ends the search:
+    # removing the row would renumber the rows after it.
+    missing = bad.replace('kind = "pedestrian"\n', "", 1)
+    d = client.post("/api/validate", json={"path": PED, "text": missing}, headers=ORIGIN).json()
+    fields = [e["field"] for e in d["errors"]]
+    assert fields[-1] == "actors[0]" and "missing field `kind`" in d["errors"][-1]["message"], fields
+
+
+def test_an_off_road_path_is_a_warning_not_an_error(client) -> None:
+    text = client.get("/api/file", params={"path": PED}).json()["text"]
+    d = client.post("/api/validate", json={"path": PED, "text": text}, headers=ORIGIN).json()
+    assert d["ok"] and d["warnings"] == []
+    doc = d["doc"]
+    i = next(i for i, a in enumerate(doc["actors"]) if "waypoints" in a)
+    edits = [{"path": ["actors", i, "waypoints", 1], "value": {"x": 60.0, "y": 60.0}, "floats": True}]
+    r = client.post("/api/edit", json={"path": PED, "text": text, "edits": edits}, headers=ORIGIN).json()
+    assert r["ok"], r.get("error")
+    (w,) = r["warnings"]
+    assert w["field"] == f"actors[{i}].waypoints"
+    assert "from the nearest lane open to pedestrian" in w["message"] and "(60.0, 60.0)" in w["message"]
+    r = client.post(
+        "/api/save",
+        json={"path": "01_pedestrian/off.toml", "text": r["text"], "create": True},
+        headers=ORIGIN,
+    )
+    assert r.json()["saved"]
+
+
+def test_new_scenarios_map_picker_template_and_save_as_path(client, workspace: Path) -> None:
+    info = client.get("/api/info").json()
+    assert {"builtin:town01", "builtin:town02"} <= set(info["builtin_maps"])
+    assert {"expert", "late_expert", "follower@8", "lights@8", "constant@8"} <= set(info["drivers"])
+    body = {"id": "n1", "category": "01_pedestrian"}
+    d = client.post(
+        "/api/new", json={**body, "template": False, "map": "builtin:town02"}, headers=ORIGIN
+    ).json()
+    assert 'map = "builtin:town02"' in d["text"] and d["path"] == "01_pedestrian/n1.toml"
+    kept = client.post("/api/new", json=body, headers=ORIGIN).json()
+    dropped = client.post("/api/new", json={**body, "keep_actors": False}, headers=ORIGIN).json()
+    assert kept["ok"] and dropped["ok"], dropped.get("error")
+    assert kept["doc"]["description"] == "" and kept["doc"]["actors"]
+    assert "actors" not in dropped["doc"] and "obstacles" not in dropped["doc"]
+    from starlette.testclient import TestClient
+
+    from drivehierarchy.editor import create_app
+
+    # No --map and no map picked: a clear refusal, not `map = ""`.
+    with TestClient(create_app(workspace / "r4", None, precompute=False), base_url=BASE) as c:
+        r = c.post("/api/new", json={**body, "template": False}, headers=ORIGIN)
+        assert r.status_code == 400 and "needs a map" in r.json()["error"]
+    # Rooted at a category folder, Save as's default stays in it.
+    with TestClient(
+        create_app(workspace / "r4" / "01_pedestrian", None, precompute=False), base_url=BASE
+    ) as c:
+        d = c.post("/api/new", json=body, headers=ORIGIN).json()
+        assert d["path"] == "n1.toml", d["path"]
+
+
+def test_drivers_by_the_probes_names(client) -> None:
+    text = client.get("/api/file", params={"path": PED}).json()["text"]
+    body = {"path": PED, "text": text}
+    ep = client.post("/api/episode", json={**body, "driver": "follower@8"}, headers=ORIGIN).json()
+    run = client.post("/api/run", json={**body, "driver": "follower@8"}, headers=ORIGIN).json()
+    assert ep["end_s"] == run["states"][-1]["time_s"] and ep["start_s"] == run["states"][0]["time_s"]
+    assert ep["termination"] == run["score"]["termination_reason"]
+    r = client.post("/api/episode", json={**body, "driver": "follower@99"}, headers=ORIGIN)
+    assert r.status_code == 400 and "follower@99" in r.json()["error"]
+
+
+def test_favicon(client) -> None:
+    r = client.get("/favicon.ico")
+    assert r.status_code == 200 and r.headers["content-type"].startswith("image/svg")
+
+
+def test_an_error_caused_by_a_removed_key_is_not_reported() -> None:
+    from drivehierarchy.editor.app import _caused_by
+
+    rate = "traffic.flows[0].vehs_per_hour"
+    assert _caused_by("traffic.flows[0]", "give exactly one of vehs_per_hour and probability", rate)
+    assert _caused_by("actors[0]", "missing field `waypoints`", "actors[0].waypoints")
+    assert _caused_by("actors[0].start.of", "must be a place", "actors[0].start")
+    assert not _caused_by("actors[0]", "missing field `kind`", "actors[0].at_end")
+    assert not _caused_by("actors[1].speed_mps", "must be ≥ 0", "actors[0].speed_mps")

@@ -251,7 +251,7 @@ def write_scenario(tmp_path: Path, text: str) -> Path:
 
 def base_scenario() -> str:
     text = (builtin_root() / "r4" / f"{SCENARIO}.toml").read_text(encoding="utf-8")
-    return text.replace('map = "../../maps/town01/town01.net.xml"', f'map = "{TOWN01.as_posix()}"')
+    return text.replace('map = "builtin:town01"', f'map = "{TOWN01.as_posix()}"')
 
 
 def test_malformed_toml_names_the_file_and_position(tmp_path: Path) -> None:

@@ -82,6 +82,40 @@ def test_unknown_agent_is_a_config_error(tmp_path: Path) -> None:
         runner.evaluate(two_scenarios()[:1], tmp_path, runner.RunOptions(agent="nobody"), log=lambda _: None)
 
 
+def test_the_probes_drivers_are_agents_by_the_same_names(tmp_path: Path) -> None:
+    """`r4 run --agent follower@8` is the probe's (and the editor's) follower@8: a committed
+    probe row is reproduced from the command line."""
+    import csv
+
+    from drivehierarchy.benchmark.r4.agents import AGENTS
+    from drivehierarchy.suite_probe import _agent
+
+    for name in ("expert", "late_expert", "zero", "follower@8", "lights@6", "constant@10"):
+        a, b = AGENTS.create(name), _agent(name)
+        assert type(a) is type(b) and getattr(a, "name", None) == getattr(b, "name", None), name
+    for bad in ("follower@0", "lights@fast", "constant@31"):
+        with pytest.raises(ConfigError, match=r"expected \w+@V with V a speed in m/s"):
+            AGENTS.create(bad)
+    rows = csv.DictReader((Path(__file__).resolve().parents[2] / "docs" / "suite_probe.csv").open())
+    want = next(
+        r
+        for r in rows
+        if (r["id"], r["cell"], r["seed"]) == ("town01_01_midblock_crossing", "follower@8", "0")
+    )
+    proc = subprocess.run(
+        [sys.executable, "-m", "drivehierarchy.cli", "r4", "run", "--agent", "follower@8",
+         "--scenario", "01_pedestrian/town01_01_midblock_crossing", "--seed", "0",
+         "--out", str(tmp_path), "--json"],
+        capture_output=True, text=True, timeout=300, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    record = json.loads(proc.stdout)
+    assert (round(record["score_composed"], 1), record["termination_reason"]) == (
+        float(want["score"]),
+        want["termination"],
+    )
+
+
 def test_cli_run_writes_frames(tmp_path: Path) -> None:
     out = tmp_path / "one"
     proc = subprocess.run(

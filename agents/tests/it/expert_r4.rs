@@ -17,7 +17,10 @@ use dh_env::DECISION_INTERVAL_TICKS;
 use std::path::{Path, PathBuf};
 
 fn repo_root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf()
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf();
+    // The suite names its maps `builtin:NAME`; the Python package registers them, a test does.
+    dh_env::scenario::set_builtin_maps_dir(root.join("scenarios/maps"));
+    root
 }
 
 fn sumo_home() -> Option<PathBuf> {

@@ -484,10 +484,27 @@ pub fn resolve_map_path(file: &Path, map: &str, sumo_home: Option<&Path>) -> Res
             file,
             "map",
             map,
-            format!("map file not found (looked for {}, relative to the scenario file)", p.display()),
+            format!(
+                "map file not found (looked for {}, relative to the scenario file){}",
+                p.display(),
+                builtin_hint(map)
+            ),
         ));
     }
     Ok(p)
+}
+
+/// For a missing relative map named like a shipped one (`../../maps/town01/town01.net.xml` in a
+/// copied suite folder): the `builtin:` name that finds it from anywhere.
+fn builtin_hint(map: &str) -> String {
+    let Some(dir) = BUILTIN_MAPS.get() else { return String::new() };
+    let name = Path::new(map).file_name().and_then(|n| n.to_str()).and_then(|n| n.strip_suffix(".net.xml"));
+    match name {
+        Some(n) if !n.is_empty() && dir.join(n).join(format!("{n}.net.xml")).is_file() => {
+            format!("; `{n}` is a shipped map: write map = \"{BUILTIN_PREFIX}{n}\" to use it from any folder")
+        }
+        _ => String::new(),
+    }
 }
 
 /// Resolution context: the file for errors and the map.

@@ -13,8 +13,10 @@ A local server that writes files, so every request is checked before it reaches 
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import os
+import re
 import threading
 from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
@@ -32,7 +34,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from drivehierarchy import DriveHierarchyError, _core
 from drivehierarchy.editor import files
-from drivehierarchy.editor.scene import PROBE_CELLS, PlayerCache, ScenePlayer
+from drivehierarchy.editor.scene import DRIVERS, PROBE_CELLS, PlayerCache, ScenePlayer
 from drivehierarchy.scenarios import builtin_root, builtin_scenarios, sumo_home
 
 STATIC = Path(__file__).resolve().parent / "static"
@@ -162,11 +164,18 @@ class Editor:
         return str((self.abs_path(rel).parent / spec).resolve())
 
     def geometry(self, rel: str, text: str) -> dict[str, Any]:
-        """`{ok, geometry | error, doc}`: the world's resolution of the text, or the validator's
-        message split into file, line, column, field, value and reason; `doc` is the TOML as
-        data (what the page's forms show)."""
+        """`{ok, geometry | error, errors, warnings, doc}`: the world's resolution of the text,
+        or the validator's messages split into file, line, column, field, value and reason
+        (`error` the first, `errors` every independent one found); `warnings` (on a valid
+        text) are what the world accepts but an author likely did not mean; `doc` is the TOML
+        as data (what the page's forms show)."""
         doc = files.doc_json(text)
-        return {"doc": doc, **self._resolve(rel, text)}
+        out = self._resolve(rel, text)
+        if out["ok"]:
+            out["warnings"] = self.warnings(rel, doc, out["geometry"])
+        else:
+            out["errors"] = self._more_errors(rel, text, out["error"])
+        return {"doc": doc, **out}
 
     def _resolve(self, rel: str, text: str) -> dict[str, Any]:
         try:
@@ -176,6 +185,124 @@ class Editor:
             return {"ok": False, "error": files.parse_error(msg)}
         geo["summary"]["file"] = rel
         return {"ok": True, "geometry": geo}
+
+    def _more_errors(self, rel: str, text: str, first: dict[str, Any]) -> list[dict[str, Any]]:
+        """Every independent error of the text, not only the first the validator stops at.
+
+        The validator (Rust) stops at its first error. Each error's key is removed from a copy
+        of the text and the copy validated again: an error at another key is independent of
+        the ones before (its line mapped back to the text as written). It stops at a TOML
+        syntax error, at an error on a key already removed or inside / around one (that is the
+        removal's own consequence, e.g. a required key now missing), at an error on a whole
+        row (`actors[1]`: removing it would renumber the rows after it), or after
+        `MAX_ERRORS`."""
+        errors = [first]
+        removed: list[str] = []
+        current = text
+        while len(errors) < MAX_ERRORS:
+            field = errors[-1].get("field")
+            path = files.field_path(field) if field else None
+            if not path or isinstance(path[-1], int):
+                break  # removing a row would renumber the rows after it (and their errors)
+            try:
+                current = files.apply_edits(current, [{"path": path, "delete": True}])
+            except (ValueError, tomlkit.exceptions.TOMLKitError):
+                break
+            removed.append(field)
+            nxt = self._resolve(rel, current)
+            if nxt["ok"]:
+                break
+            err = nxt["error"]
+            f = err.get("field")
+            if not f or any(_caused_by(f, err.get("reason") or "", r) for r in removed):
+                break
+            errors.append(files.relocate_error(err, current, text))
+        return errors
+
+    def warnings(self, rel: str, doc: Any, geo: dict[str, Any]) -> list[dict[str, Any]]:
+        """Actor paths that leave every lane open to the actor's class by more than a lane
+        width (`snap_to_lane` from each point of the resolved path): valid, but likely a
+        misplaced point. Pedestrians and cyclists cross roads on purpose (the suite's
+        jaywalkers, a cyclist crossing a junction), so for them a point on any lane counts as
+        on a lane: only a point off every lane is warned about."""
+        if not isinstance(doc, dict) or not isinstance(doc.get("map"), str):
+            return []
+        spec = self.map_spec_for(rel, doc["map"])
+        widths = _lane_widths(spec)
+        out = []
+        for i, actor in enumerate(geo.get("actors", [])):
+            path = actor.get("motion", {}).get("path") or []
+            vclass = actor.get("vclass")
+            worst: tuple[float, list[float]] | None = None
+            crosses = vclass in ("pedestrian", "bicycle")
+            for x, y in path:
+                hit = _core.snap_to_lane(
+                    spec, float(x), float(y), OFF_ROAD_SEARCH_M, vclass, True, sumo_home()
+                )
+                if hit is not None and hit[2] <= widths.get(hit[0], 3.2):
+                    continue
+                if crosses:
+                    near = _core.snap_to_lane(
+                        spec, float(x), float(y), OFF_ROAD_SEARCH_M, None, True, sumo_home()
+                    )
+                    if near is not None and near[2] <= widths.get(near[0], 3.2):
+                        continue
+                dist = hit[2] if hit is not None else OFF_ROAD_SEARCH_M
+                if worst is None or dist > worst[0]:
+                    worst = (dist, [x, y])
+            if worst is None:
+                continue
+            dist, (x, y) = worst
+            actor_doc = (doc.get("actors") or [{}])[i] if i < len(doc.get("actors") or []) else {}
+            key = "waypoints" if "waypoints" in actor_doc else "route" if "route" in actor_doc else "at"
+            far = f"{dist:.0f} m" if dist < OFF_ROAD_SEARCH_M else f"over {OFF_ROAD_SEARCH_M:.0f} m"
+            out.append(
+                {
+                    "field": f"actors[{i}].{key}",
+                    "message": (
+                        f"field `actors[{i}].{key}`: the path of {actor.get('name')!r} passes "
+                        f"({x:.1f}, {y:.1f}), {far} from the nearest lane open to {vclass} "
+                        "(more than a lane width): is a point misplaced? (a warning: the file is valid)"
+                    ),
+                }
+            )
+        return out
+
+
+# Errors collected per validation (each costs one more validation of the text).
+MAX_ERRORS = 20
+# How far from a path point a lane is looked for (farther: "over 200 m").
+OFF_ROAD_SEARCH_M = 200.0
+
+
+def _inside(field: str, outer: str) -> bool:
+    """`field` is `outer` or lies inside it (`actors[0].start.of` inside `actors[0]`)."""
+    return field == outer or field.startswith((outer + ".", outer + "["))
+
+
+def _caused_by(field: str, reason: str, removed: str) -> bool:
+    """Whether an error found after removing `removed` may be that removal's consequence: an
+    error at the removed key or inside it, or at a table around it whose reason names it
+    (`missing field `waypoints``, `give exactly one of vehs_per_hour and probability`; a
+    `missing field `kind`` is not the removed `at_end`'s)."""
+    if _inside(field, removed):
+        return True
+    if _inside(removed, field):
+        leaf = re.split(r"[.\[]", removed)[-1].rstrip("]")
+        return re.search(rf"\b{re.escape(leaf)}\b", reason) is not None
+    return False
+
+
+@functools.lru_cache(maxsize=8)
+def _lane_widths(spec: str) -> dict[str, float]:
+    geo = json.loads(_core.map_geometry(spec, sumo_home()))
+    return {lane["id"]: float(lane["width_m"]) for lane in geo["lanes"]}
+
+
+def builtin_maps() -> list[str]:
+    """The shipped maps, as `builtin:NAME`."""
+    maps = builtin_root() / "maps"
+    return sorted(f"builtin:{p.name}" for p in maps.iterdir() if (p / f"{p.name}.net.xml").is_file())
 
 
 def _json(request_body: bytes) -> dict[str, Any]:
@@ -203,14 +330,22 @@ def templates() -> dict[str, str]:
     return dict(sorted(out.items()))
 
 
-def template_text(category: str, new_id: str) -> str:
-    """A category's template with its id and name set and its map made location-independent."""
+def template_text(category: str, new_id: str, *, keep_actors: bool = True) -> str:
+    """A category's template with its id and name set, its description emptied (it describes
+    the template), its map made location-independent, and (`keep_actors=False`) its actors and
+    obstacles dropped."""
     path = templates().get(category)
     if path is None:
         raise ValueError(f"category {category!r}: no template (known: {', '.join(sorted(templates()))})")
     doc = tomlkit.parse(Path(path).read_text(encoding="utf-8"))
     doc["id"] = new_id
     doc["name"] = new_id.replace("_", " ")
+    if "description" in doc:
+        doc["description"] = ""
+    if not keep_actors:
+        for key in ("actors", "obstacles"):
+            if key in doc:
+                del doc[key]
     spec = str(doc["map"])
     if not spec.startswith(("sumo:", "builtin:")):
         real = (Path(path).parent / spec).resolve()
@@ -273,8 +408,22 @@ def create_app(
                 "files": files.list_scenarios(ed.root),
                 "categories": sorted(templates()),
                 "probe_cells": list(PROBE_CELLS),
+                "drivers": list(DRIVERS),
+                "builtin_maps": builtin_maps(),
             }
         )
+
+    def new_rel(category: str, new_id: str) -> str:
+        """Where a new scenario is saved, relative to the actual root: `category/id.toml` when
+        the root holds category folders (the suite's layout) or is empty, `id.toml` when the
+        root is itself a category folder (or any other folder of scenarios)."""
+        cats = set(templates())
+        if ed.root.name in cats:
+            return f"{new_id}.toml"
+        subdirs = {p.name for p in ed.root.iterdir() if p.is_dir()}
+        if subdirs & cats or not any(ed.root.glob("*.toml")):
+            return f"{category}/{new_id}.toml"
+        return f"{new_id}.toml"
 
     def read(request: Request, body: bytes) -> Response:
         rel = request.query_params.get("path", "")
@@ -353,10 +502,16 @@ def create_app(
         new_id = _field(d, "id", str)
         category = _field(d, "category", str)
         if d.get("template", True):
-            text = template_text(category, new_id)
+            text = template_text(category, new_id, keep_actors=bool(d.get("keep_actors", True)))
         else:
-            text = blank_text(new_id, category, _field(d, "map", str) if "map" in d else ed.default_map or "")
-        rel = f"{category}/{new_id}.toml"
+            spec = _field(d, "map", str) if d.get("map") is not None else ed.default_map
+            if not spec:
+                raise ValueError(
+                    "request field `map`: an empty-map scenario needs a map (pick one, or start the "
+                    "editor with --map)"
+                )
+            text = blank_text(new_id, category, spec)
+        rel = new_rel(category, new_id)
         files.confine(ed.root, rel)
         return JSONResponse({"path": rel, "text": text, **ed.geometry(rel, text)})
 
@@ -378,6 +533,14 @@ def create_app(
 
     def run(request: Request, body: bytes) -> Response:
         return JSONResponse(_player(_json(body)).run_to_end())
+
+    def episode(request: Request, body: bytes) -> Response:
+        """The chosen driver's episode to its end: its first and last decision times, how it
+        ended and its score (the slider's range; no per-decision states)."""
+        return JSONResponse(_player(_json(body)).episode())
+
+    def favicon(request: Request, body: bytes) -> Response:
+        return FileResponse(STATIC / "favicon.svg", media_type="image/svg+xml")
 
     def probe(request: Request, body: bytes) -> Response:
         d = _json(body)
@@ -414,6 +577,8 @@ def create_app(
         Route("/api/scene", api(scene), methods=["POST"]),
         Route("/api/frame", api(frame), methods=["POST"]),
         Route("/api/run", api(run), methods=["POST"]),
+        Route("/api/episode", api(episode), methods=["POST"]),
+        Route("/favicon.ico", api(favicon)),
         Route("/api/probe", api(probe), methods=["POST"]),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
     ]

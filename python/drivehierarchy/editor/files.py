@@ -260,3 +260,39 @@ def parse_error(message: str) -> dict[str, Any]:
         "line": int(d["line"]) if d.get("line") else None,
         "column": int(d["column"]) if d.get("column") else None,
     }
+
+
+def field_path(field: str) -> list[str | int] | None:
+    """`actors[0].start.of` → `["actors", 0, "start", "of"]` (None: not a plain key path)."""
+    out: list[str | int] = []
+    for part in field.split("."):
+        m = re.fullmatch(r"([A-Za-z0-9_-]*)((?:\[\d+\])*)", part)
+        if not m:
+            return None
+        if m.group(1):
+            out.append(m.group(1))
+        out.extend(int(i) for i in re.findall(r"\[(\d+)\]", m.group(2)))
+    return out or None
+
+
+def relocate_error(err: dict[str, Any], edited: str, original: str) -> dict[str, Any]:
+    """An error found on `edited` (keys removed from `original`) with its line number mapped
+    back to `original`."""
+    line = err.get("line")
+    if not line:
+        return err
+    import difflib
+
+    a, b = original.splitlines(), edited.splitlines()
+    mapped = line
+    index = line - 1
+    for tag, i1, _i2, j1, j2 in difflib.SequenceMatcher(None, a, b, autojunk=False).get_opcodes():
+        if j1 <= index < j2:
+            mapped = i1 + (index - j1) + 1 if tag == "equal" else i1 + 1
+            break
+    out = dict(err)
+    out["line"] = mapped
+    out["message"] = re.sub(
+        r"^(.*?):\d+:(\d+): ", lambda m: f"{m.group(1)}:{mapped}:{m.group(2)}: ", err["message"], count=1
+    )
+    return out

@@ -29,7 +29,9 @@ from drivehierarchy.envs.config import BevConfig, CameraConfig
 # The views the editor and `scenario preview` render: the gallery's (front 2× supersampled).
 FRONT = CameraConfig(supersample=2)
 BEV = BevConfig()
-DRIVERS = ("expert", "late_expert", "follower@8", "lights@8", "zero")
+# The editor's driver menu; any probe cell (`follower@6`, `constant@10`, ...) is accepted, by
+# the same names as `scenario probe` and `r4 run --agent`.
+DRIVERS = ("expert", "late_expert", "follower@8", "lights@8", "constant@8", "zero")
 # The reference drivers of the editor's "Probe" (suite_probe cells): solvable (expert), graded
 # (late expert), and not solvable blind (route follower, light-obeying follower).
 PROBE_CELLS = ("expert", "late_expert", "follower@8", "lights@8")
@@ -61,10 +63,13 @@ class ScenePlayer:
     """One buffer (`path` + `text`, or the file itself when `text` is None) driven by `driver`."""
 
     def __init__(self, path: str, text: str | None, *, seed: int = 0, driver: str = "expert") -> None:
-        from drivehierarchy.suite_probe import _agent
+        from drivehierarchy._core import ConfigError
+        from drivehierarchy.suite_probe import _agent, parse_cell
 
-        if driver not in DRIVERS:
-            raise ValueError(f"driver {driver!r}: expected one of {', '.join(DRIVERS)}")
+        try:
+            parse_cell(driver)
+        except ConfigError as exc:
+            raise ValueError(f"driver {driver!r}: {exc}") from None
         self.lock = threading.RLock()
         self.path = path
         self.text = text
@@ -233,6 +238,19 @@ class ScenePlayer:
                     self.frames[(index, view)] = png_bytes(self._render(index, view))
                     return True
         return False
+
+    @_locked
+    def episode(self) -> dict[str, Any]:
+        """Drives the episode to its end: its first and last decision times and how it ended."""
+        self._extend_to(float("inf"))
+        assert self.score is not None
+        return {
+            "driver": self.driver,
+            "start_s": self.times[0],
+            "end_s": self.times[-1],
+            "termination": self.score["termination_reason"],
+            "score": self.score["score_composed"],
+        }
 
     @_locked
     def run_to_end(self) -> dict[str, Any]:

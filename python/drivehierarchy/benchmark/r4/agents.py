@@ -1,5 +1,9 @@
 """The agents `r4 evaluate --agent NAME` can drive: a registry of named factories (and
-`prefix:ARG` factories such as `sb3:PATH`); the VLM agent is driven by the async harness."""
+`prefix:ARG` factories such as `sb3:PATH`); the VLM agent is driven by the async harness.
+
+The reference drivers of `scenario probe` and the editor are accepted by the same names
+(`late_expert`, `follower@V`, `lights@V`, `constant@V`; `suite_probe.parse_cell`), so a probe
+row or an editor run is reproduced with `r4 run --agent follower@8`."""
 
 from __future__ import annotations
 
@@ -32,23 +36,47 @@ class AgentRegistry:
         prefix, sep, arg = name.partition(":")
         if sep and prefix in self._prefixes:
             return self._prefixes[prefix](arg)
-        try:
+        if name in self._factories:
             return self._factories[name]()
-        except KeyError:
-            from drivehierarchy._suggest import did_you_mean
+        family, at, _ = name.partition("@")
+        if at and family in PROBE_FAMILIES:
+            from drivehierarchy.suite_probe import _agent, parse_cell
 
-            known = [*sorted(self._factories), VLM_AGENT]
-            raise ConfigError(
-                f"config `agent` = {name!r}: unknown agent{did_you_mean(name, known)} (known: "
-                f"{', '.join([*known, *(f'{p}:PATH' for p in sorted(self._prefixes))])})"
-            ) from None
+            try:
+                parse_cell(name)
+            except ConfigError:
+                raise ConfigError(
+                    f"config `agent` = {name!r}: expected {family}@V with V a speed in m/s in (0, 30] "
+                    f"(e.g. {family}@8)"
+                ) from None
+            # The probe's own factory: the same driver as its rows and the editor's runs.
+            return _agent(name)
+        from drivehierarchy._suggest import did_you_mean
+
+        known = [*sorted(self._factories), VLM_AGENT]
+        raise ConfigError(
+            f"config `agent` = {name!r}: unknown agent{did_you_mean(name, known)} (known: "
+            f"{', '.join([*known, *PROBE_CELL_FORMS, *(f'{p}:PATH' for p in sorted(self._prefixes))])})"
+        )
 
     def names(self) -> list[str]:
-        return sorted(self._factories) + [f"{p}:..." for p in sorted(self._prefixes)]
+        return sorted(self._factories) + list(PROBE_CELL_FORMS) + [f"{p}:..." for p in sorted(self._prefixes)]
+
+
+# The probe's speed families (`follower@8`): V in m/s, (0, 30].
+PROBE_FAMILIES = ("follower", "lights", "constant")
+PROBE_CELL_FORMS = tuple(f"{f}@V" for f in PROBE_FAMILIES)
+
+
+def _late_expert() -> Agent:
+    from drivehierarchy.suite_probe import _agent
+
+    return _agent("late_expert")
 
 
 AGENTS = AgentRegistry()
 AGENTS.register("expert", ExpertAgent)
+AGENTS.register("late_expert", _late_expert)
 AGENTS.register("zero", lambda: ConstantAgent([0.0, 0.0], name="zero"))
 AGENTS.register("constant8", lambda: ConstantAgent([0.0, 8.0], name="constant8"))
 

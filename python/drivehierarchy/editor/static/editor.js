@@ -9,6 +9,7 @@ const S = {
   path: null, text: "", doc: null, geo: null, error: null, map: null, mapKey: null,
   view: { scale: 1, ox: 0, oy: 0 }, mode: "select", selected: null, pending: [],
   scene: null, run: null, dirty: false, time: 0, info: null, busy: 0, hoverLane: null,
+  errors: [], warnings: [], episode: null, undo: [], redo: [],
 };
 window.editor = { S };
 
@@ -26,12 +27,15 @@ async function api(url, body) {
     };
     const r = await fetch(url, opts);
     const type = r.headers.get("content-type") || "";
-    if (type.startsWith("image/")) {
-      if (!r.ok) throw new Error(await r.text());
+    if (type.startsWith("image/") && r.ok) {
       return { blob: await r.blob(), time: r.headers.get("X-Scene-Time") };
     }
     const d = type.includes("json") ? await r.json() : { error: await r.text() };
-    if (!r.ok && !("ok" in d)) throw new Error(d.error || r.statusText);
+    if (!r.ok && !("ok" in d)) {
+      const e = new Error(d.error || `${r.status} ${r.statusText}`);
+      e.status = r.status;
+      throw e;
+    }
     return d;
   } finally {
     busy(-1);
@@ -42,6 +46,13 @@ function status(msg, kind) {
   const el = $("status");
   el.textContent = msg;
   el.className = kind || "";
+}
+
+// An event handler whose failure is shown in the status line (never an unhandled promise).
+function guard(fn, what) {
+  return (...args) => Promise.resolve().then(() => fn(...args)).catch((e) => {
+    status((what ? what + ": " : "") + e.message, "bad");
+  });
 }
 
 function buffer() {
@@ -56,12 +67,16 @@ async function setBuffer(d) {
   if (d.ok) {
     S.geo = d.geometry;
     S.error = null;
-    // The slider spans the episode's timeout (2 × the scenario duration); the light timelines too.
-    $("time").max = String(Math.max(5, Math.ceil(S.geo.scenario_duration_s * 2)));
+    S.errors = [];
+    S.warnings = d.warnings || [];
+    S.episode = null; // the driver's episode of this text is asked for with the preview
   } else {
     S.error = d.error;
+    S.errors = d.errors || [d.error];
+    S.warnings = [];
+    previewSeq++;
   }
-  $("path").textContent = S.path ? S.path + (S.dirty ? " *" : "") : "";
+  showPath();
   $("toml").value = S.text;
   await ensureMap();
   // The form is rebuilt from the new text: the input that had the focus gets it back.
@@ -74,6 +89,7 @@ async function setBuffer(d) {
     if (el && el.type !== "hidden") el.focus();
   }
   draw();
+  document.body.classList.toggle("has-file", !!S.doc);
   if (!S.error) {
     S.run = null;
     $("run-result").textContent = "";
@@ -81,6 +97,42 @@ async function setBuffer(d) {
     drawTimeline();
     schedulePreview();
   }
+}
+
+// Another buffer (opened or new): nothing of the one before stays on the page.
+function clearPreview() {
+  S.episode = null;
+  S.scene = null;
+  S.run = null;
+  previewSeq++;
+  for (const view of ["front", "bev"]) {
+    const img = $(view);
+    if (img.src) URL.revokeObjectURL(img.src);
+    img.removeAttribute("src");
+    delete img.dataset.time;
+    $(view + "-label").textContent = "";
+  }
+  $("time-end").textContent = "";
+  delete $("time-end").dataset.endS;
+  $("time-out").textContent = "–";
+  $("run-result").textContent = "";
+  $("probe-result").textContent = "";
+  drawTimeline();
+}
+
+function showPath() {
+  $("path").textContent = S.path ? S.path + (S.dirty ? " *" : "") : "";
+  document.title = (S.dirty ? "* " : "") + (S.path || "drivehierarchy scenario editor");
+}
+
+// The status after a buffer change: what the validator said (never a stale "saved").
+function bufferStatus(what) {
+  if (S.error) {
+    const n = S.errors.length;
+    return status(`${what}: invalid, ${n} error${n === 1 ? "" : "s"} (see the fields)`, "bad");
+  }
+  const w = S.warnings.length;
+  return status(w ? `${what}: valid, ${w} warning${w === 1 ? "" : "s"}` : `${what}: valid`, w ? "warn" : "good");
 }
 
 async function ensureMap() {
@@ -93,8 +145,10 @@ async function ensureMap() {
   try {
     S.map = await api("/api/map?" + q.toString());
     S.mapKey = key;
-    fitView();
+    fitRoute();
   } catch (e) {
+    S.map = null;
+    S.mapKey = null;
     status("map: " + e.message, "bad");
   }
 }
@@ -108,11 +162,46 @@ function edit(edits) {
 }
 
 async function applyEdit(edits) {
+  const before = S.text;
   const d = await api("/api/edit", { ...buffer(), edits });
   if (d.error && !("ok" in d)) throw new Error(d.error);
+  remember(before, d.text);
   S.dirty = true;
   await setBuffer(d);
-  status(S.error ? "invalid: see the field" : "ok", S.error ? "bad" : "good");
+  bufferStatus("edited");
+}
+
+// Undo / redo: the buffer's texts before each edit (form, map, TOML panel), re-validated when
+// taken back.
+function remember(before, after) {
+  if (before === after) return;
+  S.undo.push(before);
+  if (S.undo.length > 200) S.undo.shift();
+  S.redo = [];
+  updateUndo();
+}
+
+function updateUndo() {
+  $("btn-undo").disabled = !S.undo.length;
+  $("btn-redo").disabled = !S.redo.length;
+}
+
+async function undoRedo(from, to, what) {
+  if (!from.length) return;
+  const text = from.pop();
+  to.push(S.text);
+  updateUndo();
+  const d = await api("/api/validate", { path: S.path, text });
+  S.dirty = true;
+  await setBuffer({ ...d, text });
+  bufferStatus(what);
+}
+const undo = () => undoRedo(S.undo, S.redo, "undone");
+const redo = () => undoRedo(S.redo, S.undo, "redone");
+
+// Work not saved is confirmed away (another file, a new scenario).
+function mayDiscard(what) {
+  return !S.dirty || window.confirm(`${S.path || "This scenario"} has unsaved changes. Discard them and ${what}?`);
 }
 
 async function openFile(rel) {
@@ -120,8 +209,16 @@ async function openFile(rel) {
   S.dirty = false;
   S.mapKey = null;
   S.selected = null;
+  S.scene = null;
+  S.geo = null; // an invalid file draws nothing of the one before
+  clearPreview();
+  S.undo = [];
+  S.redo = [];
+  updateUndo();
   await setBuffer({ ...d, path: rel });
-  status("opened " + rel, "good");
+  $("file-list").value = rel;
+  if (S.error) bufferStatus("opened " + rel);
+  else status("opened " + rel + (S.warnings.length ? ` (${S.warnings.length} warning${S.warnings.length === 1 ? "" : "s"})` : ""), S.warnings.length ? "warn" : "good");
 }
 
 // -- view ----------------------------------------------------------------------------------------
@@ -130,12 +227,49 @@ const ctx = canvas.getContext("2d");
 
 function fitView() {
   if (!S.map) return;
-  const [x0, y0, x1, y1] = S.map.bounds;
+  fitBounds(S.map.bounds, 10);
+}
+
+function fitBounds([x0, y0, x1, y1], margin) {
   resizeCanvas();
-  const s = Math.min(canvas.width / (x1 - x0 + 20), canvas.height / (y1 - y0 + 20));
+  const s = Math.min(canvas.width / (x1 - x0 + 2 * margin), canvas.height / (y1 - y0 + 2 * margin));
   S.view.scale = s;
   S.view.ox = (x0 + x1) / 2 - canvas.width / 2 / s;
   S.view.oy = (y0 + y1) / 2 + canvas.height / 2 / s;
+}
+
+// The ego's route and every actor's path, with a margin; the whole map when nothing is placed.
+function fitRoute() {
+  if (!S.geo) return fitView();
+  const pts = [...S.geo.ego.route, S.geo.ego.destination, [S.geo.ego.start.x, S.geo.ego.start.y]];
+  for (const a of S.geo.actors) {
+    const m = a.motion;
+    if (m.path) pts.push(...m.path);
+    else if (m.pose) pts.push([m.pose.x, m.pose.y]);
+  }
+  const xs = pts.map((p) => p[0]), ys = pts.map((p) => p[1]);
+  return fitBounds([Math.min(...xs), Math.min(...ys), Math.max(...xs), Math.max(...ys)], 30);
+}
+window.editor.fitView = () => { fitView(); draw(); };
+
+// A scale bar (1, 2 or 5 × 10^k m, about 120 px) in the map's lower left corner.
+function scaleBar() {
+  const target = 120 / S.view.scale;
+  const k = Math.pow(10, Math.floor(Math.log10(target)));
+  const m = [5, 2, 1].map((f) => f * k).find((v) => v <= target) || k;
+  const w = m * S.view.scale, x = 12, y = canvas.height - 14;
+  ctx.fillStyle = "rgba(255,255,255,.8)";
+  ctx.fillRect(x - 6, y - 18, w + 12, 26);
+  ctx.strokeStyle = "#222";
+  ctx.lineWidth = 2;
+  ctx.beginPath();
+  ctx.moveTo(x, y - 5); ctx.lineTo(x, y); ctx.lineTo(x + w, y); ctx.lineTo(x + w, y - 5);
+  ctx.stroke();
+  ctx.fillStyle = "#222";
+  ctx.font = "11px system-ui, sans-serif";
+  ctx.fillText(m >= 1000 ? `${m / 1000} km` : `${m} m`, x + 2, y - 7);
+  canvas.dataset.scaleM = String(m);
+  canvas.dataset.scalePx = w.toFixed(1);
 }
 
 function resizeCanvas() {
@@ -221,7 +355,14 @@ window.editor.triggerHandles = triggerHandles;
 function draw() {
   resizeCanvas();
   ctx.clearRect(0, 0, canvas.width, canvas.height);
-  if (!S.map) return;
+  if (!S.map) {
+    ctx.fillStyle = "#555";
+    ctx.font = "15px system-ui, sans-serif";
+    ctx.textAlign = "center";
+    ctx.fillText("Open a scenario file (the list at the top left), or pick a category and New.", canvas.width / 2, canvas.height / 2);
+    ctx.textAlign = "start";
+    return;
+  }
   ctx.lineCap = "round";
   ctx.lineJoin = "round";
   for (const j of S.map.junctions) {
@@ -266,6 +407,7 @@ function draw() {
     ctx.setLineDash([]);
     for (const p of S.pending) dot(p.x, p.y, 4, "#e06c00");
   }
+  scaleBar();
 }
 
 function drawScenario() {
@@ -405,7 +547,7 @@ function hover(px, py) {
   }, 60);
 }
 
-window.addEventListener("mouseup", async (ev) => {
+window.addEventListener("mouseup", guard(async (ev) => {
   const d = drag;
   drag = null;
   if (!d) return;
@@ -422,7 +564,7 @@ window.addEventListener("mouseup", async (ev) => {
     const [px, py] = eventPos(ev);
     selectAt(px, py);
   }
-});
+}));
 
 function selectAt(px, py) {
   if (!S.geo) return;
@@ -456,7 +598,7 @@ function round(v) {
   return Math.round(v * 10) / 10;
 }
 
-canvas.addEventListener("click", async (ev) => {
+canvas.addEventListener("click", guard(async (ev) => {
   if (S.mode === "select") return;
   const [px, py] = eventPos(ev);
   const [x, y] = toWorld(px, py);
@@ -482,13 +624,23 @@ canvas.addEventListener("click", async (ev) => {
     S.pending.push({ x, y, lane: hit.lane, s: hit.s });
     draw();
   }
-});
+}));
 
-canvas.addEventListener("dblclick", () => finishActor());
+canvas.addEventListener("dblclick", guard(() => finishActor()));
 window.addEventListener("keydown", (ev) => {
   if (ev.target.tagName === "INPUT" || ev.target.tagName === "TEXTAREA") return;
   if (ev.key === "Escape" && S.mode === "pick") return setMode("select");
-  if (ev.key === "Enter") finishActor();
+  if ((ev.ctrlKey || ev.metaKey) && ev.key.toLowerCase() === "z") {
+    ev.preventDefault();
+    guard(ev.shiftKey ? redo : undo)();
+    return;
+  }
+  if ((ev.ctrlKey || ev.metaKey) && ev.key.toLowerCase() === "y") {
+    ev.preventDefault();
+    guard(redo)();
+    return;
+  }
+  if (ev.key === "Enter") guard(finishActor)();
   if (ev.key === "Escape") setMode("select");
 });
 
@@ -1143,30 +1295,41 @@ function fieldPath(field) {
 }
 
 function showError() {
-  for (const el of document.querySelectorAll(".invalid")) el.classList.remove("invalid");
-  for (const el of document.querySelectorAll(".field-error")) el.remove();
+  for (const el of document.querySelectorAll(".invalid, .warned")) el.classList.remove("invalid", "warned");
+  for (const el of document.querySelectorAll(".field-error, .field-warning")) el.remove();
   const box = $("error-box");
-  if (!S.error) {
-    box.hidden = true;
-    return;
+  const errors = S.error ? S.errors : [];
+  box.hidden = !errors.length;
+  box.replaceChildren(...errors.map((e) => h("div", { class: "error-line" }, e.message)));
+  const wbox = $("warning-box");
+  wbox.hidden = !S.warnings.length;
+  wbox.replaceChildren(...S.warnings.map((w) => h("div", { class: "warning-line" }, "warning: " + w.message)));
+  let first = true;
+  for (const e of errors) {
+    const f = markField(e.field, "invalid", "field-error", e.message);
+    if (f && first) f.scrollIntoView({ block: "nearest" });
+    if (f) first = false;
   }
-  box.hidden = false;
-  box.textContent = S.error.message;
-  if (!S.error.field) return;
-  let p = fieldPath(S.error.field);
-  // The named key's input, else the nearest enclosing one (a row, a table) that has one.
+  for (const w of S.warnings) markField(w.field, "warned", "field-warning", "warning: " + w.message);
+}
+
+// Shows a message at the field it names: the key's input, else the nearest enclosing one (a
+// row, a table) that has one.
+function markField(field, cls, msgCls, message) {
+  if (!field) return null;
+  let p = fieldPath(field);
   while (p) {
     const q = CSS.escape(p);
     const input = document.querySelector(`[data-path="${q}"], [data-row="${q}"], [data-rows="${q}"]`);
     if (input) {
       const f = input.closest(".field") || input;
-      f.classList.add("invalid");
-      f.append(h("div", { class: "field-error" }, S.error.message));
-      f.scrollIntoView({ block: "nearest" });
-      return;
+      f.classList.add(cls);
+      f.append(h("div", { class: msgCls }, message));
+      return f;
     }
     p = p.includes(".") ? p.slice(0, p.lastIndexOf(".")) : "";
   }
+  return null;
 }
 
 // -- preview, run, probe -----------------------------------------------------------------------
@@ -1176,24 +1339,68 @@ function schedulePreview() {
   previewTimer = setTimeout(preview, 120);
 }
 
+function driver() {
+  return $("driver").value;
+}
+
+// The chosen driver's episode of this text: the slider runs from its first decision to its
+// last, where a marker says how it ended.
+async function ensureEpisode(buf) {
+  buf = buf || buffer();
+  const key = buf.text + "|" + driver();
+  if (S.episode && S.episode.key === key) return S.episode;
+  const ep = await api("/api/episode", { ...buf, driver: driver() });
+  if (S.text + "|" + driver() !== key) return S.episode; // edited meanwhile: the next preview asks
+  S.episode = { ...ep, key };
+  const slider = $("time");
+  const t = Number(slider.value);
+  slider.min = String(ep.start_s);
+  slider.max = String(ep.end_s);
+  slider.value = String(Math.min(Math.max(t, ep.start_s), ep.end_s));
+  const end = $("time-end");
+  end.textContent = `${ep.driver} ends at ${ep.end_s.toFixed(2)} s: ${ep.termination} (S_R4 ${ep.score.toFixed(1)})`;
+  end.className = ep.termination === "destination_reached" ? "good" : "bad";
+  end.dataset.endS = String(ep.end_s);
+  renderLights();
+  return S.episode;
+}
+
+// For tests: the slider's range is this text's episode with the chosen driver.
+window.editor.episodeReady = () => !!S.episode && S.episode.key === S.text + "|" + driver();
+
+let previewSeq = 0;
 async function preview() {
   if (S.error || !S.path) return;
-  const t = Number($("time").value);
-  const body = { ...buffer(), time_s: t, driver: "expert" };
+  const seq = ++previewSeq;
+  // The buffer as it is now: an edit meanwhile schedules its own preview.
+  const buf = buffer();
   try {
-    S.scene = await api("/api/scene", body);
-    $("time-out").textContent = S.scene.time_s.toFixed(2);
-    draw();
-    updateNow();
-    for (const view of ["front", "bev"]) {
-      const r = await api("/api/frame", { ...body, view });
-      const img = $(view);
-      if (img.src) URL.revokeObjectURL(img.src);
-      img.src = URL.createObjectURL(r.blob);
-      img.dataset.time = r.time;
-    }
+    await ensureEpisode(buf);
+    if (seq !== previewSeq || buf.text !== S.text) return;
+    await showAt(Number($("time").value), buf);
   } catch (e) {
-    status("preview: " + e.message, "bad");
+    if (buf.text === S.text) status("preview: " + e.message, "bad");
+  }
+}
+
+// The scene, front camera and BEV at time t, driven by the chosen driver; every label shows
+// the time of the decision it was taken at.
+async function showAt(t, buf) {
+  const body = { ...(buf || buffer()), time_s: t, driver: driver() };
+  const [scene, front, bev] = await Promise.all([api("/api/scene", body),
+    api("/api/frame", { ...body, view: "front" }), api("/api/frame", { ...body, view: "bev" })]);
+  if (body.text !== S.text) return; // edited meanwhile: not this buffer's scene
+  S.scene = scene;
+  $("time-out").textContent = scene.time_s.toFixed(2);
+  draw();
+  updateNow();
+  for (const [view, r] of [["front", front], ["bev", bev]]) {
+    const img = $(view);
+    if (img.src) URL.revokeObjectURL(img.src);
+    img.src = URL.createObjectURL(r.blob);
+    img.dataset.time = r.time;
+    img.dataset.driver = body.driver;
+    $(view + "-label").textContent = `${view === "front" ? "front camera" : "bird's-eye view"}, ${body.driver}, t = ${Number(r.time).toFixed(2)} s`;
   }
 }
 
@@ -1218,6 +1425,7 @@ function drawTimeline() {
 async function runDriver() {
   if (S.error) return status("fix the error first", "bad");
   const driver = $("driver").value;
+  await ensureEpisode();
   status(`running ${driver}…`);
   S.run = await api("/api/run", { ...buffer(), driver });
   const sc = S.run.score;
@@ -1228,18 +1436,39 @@ async function runDriver() {
   status("run done", "good");
 }
 
+// Play: the chosen driver's episode decision by decision, the map, the camera and the BEV
+// together (each frame as the world rendered it); Play again stops.
+let playing = null;
 async function play() {
-  if (!S.run) await runDriver();
-  if (!S.run) return;
-  for (const st of S.run.states) {
-    S.scene = st;
-    $("time").value = String(st.time_s);
-    $("time-out").textContent = st.time_s.toFixed(2);
-    draw();
-    updateNow();
-    await new Promise((r) => setTimeout(r, 40));
+  if (playing) {
+    playing.stop = true;
+    return;
   }
-  schedulePreview();
+  if (!S.run || S.run.driver !== driver()) await runDriver();
+  if (!S.run) return;
+  const me = { stop: false };
+  playing = me;
+  $("btn-play").textContent = "Stop";
+  try {
+    const text = S.text;
+    const states = S.run.states;
+    // The current slider position onwards (from the start when it is at the end).
+    let i = states.findIndex((st) => st.time_s >= Number($("time").value) - 1e-9);
+    if (i < 0 || i >= states.length - 1) i = 0;
+    for (; i < states.length && !me.stop && S.text === text; i += 2) {
+      const t = states[i].time_s;
+      $("time").value = String(t);
+      await showAt(t);
+    }
+    if (!me.stop && S.text === text) {
+      const last = states[states.length - 1].time_s;
+      $("time").value = String(last);
+      await showAt(last);
+    }
+  } finally {
+    playing = null;
+    $("btn-play").textContent = "Play";
+  }
 }
 
 async function probe() {
@@ -1253,22 +1482,40 @@ async function probe() {
 
 // -- files -------------------------------------------------------------------------------------
 async function save(path, create) {
-  const d = await api("/api/save", { path, text: S.text, create: !!create });
+  const at = create ? $("saveas-path") : $("btn-save");
+  saveError(null);
+  if (!S.path && !create) return status("nothing to save: open or create a scenario first", "bad");
+  if (!path) {
+    saveError("give a path relative to the root, e.g. " + ($("saveas-path").placeholder || "name.toml"));
+    return status("not saved: no path given", "bad");
+  }
+  let d;
+  try {
+    d = await api("/api/save", { path, text: S.text, create: !!create });
+  } catch (e) {
+    // Refused (a path outside the root, an existing name, ...): the server's reason, at the field.
+    saveError(e.message, at);
+    return status("not saved: " + e.message, "bad");
+  }
   if (d.saved) {
     S.path = path;
     S.dirty = false;
-    $("path").textContent = path;
-    status("saved " + path, "good");
+    showPath();
     await refreshFiles();
+    status("saved " + path, "good");
   } else {
-    if (d.error && "ok" in d) {
-      S.error = d.error;
-      showError();
-      status("not saved: invalid", "bad");
-    } else {
-      status("not saved: " + d.error, "bad");
-    }
+    S.error = d.error;
+    S.errors = d.errors || [d.error];
+    showError();
+    status(`not saved: invalid, ${S.errors.length} error${S.errors.length === 1 ? "" : "s"} (see the fields)`, "bad");
   }
+}
+
+function saveError(msg, at) {
+  const el = $("save-error");
+  el.hidden = !msg;
+  el.textContent = msg || "";
+  $("saveas-path").classList.toggle("invalid-input", !!msg && at === $("saveas-path"));
 }
 
 async function refreshFiles() {
@@ -1278,49 +1525,112 @@ async function refreshFiles() {
   if (S.path) sel.value = S.path;
   const cat = $("new-category");
   if (!cat.options.length) cat.append(...S.info.categories.map((c) => h("option", { value: c }, c)));
+  // "New" starts from the category's template, or an empty map picked here.
+  const maps = $("new-map");
+  if (maps.options.length <= 1) {
+    const specs = [...S.info.builtin_maps];
+    if (S.info.default_map && !specs.includes(S.info.default_map)) specs.unshift(S.info.default_map);
+    maps.append(...specs.map((m) => h("option", { value: m }, `empty map: ${m}`)));
+  }
+  const drv = $("driver");
+  if (!drv.options.length) drv.append(...S.info.drivers.map((d) => h("option", { value: d }, d)));
 }
 
 async function newScenario() {
+  if (!mayDiscard("start a new scenario")) return status("kept the unsaved changes", "");
   const id = $("new-id").value.trim() || "new_scenario";
   const category = $("new-category").value;
-  const blank = $("new-blank").checked;
-  const d = await api("/api/new", { id, category, template: !blank, map: S.info.default_map || undefined });
-  if (d.error && !("ok" in d)) return status(d.error, "bad");
+  const map = $("new-map").value;
+  const body = map ? { id, category, template: false, map } : { id, category, template: true, keep_actors: $("new-actors").checked };
+  const d = await api("/api/new", body);
   S.mapKey = null;
   S.dirty = true;
   S.selected = null;
   S.scene = null;
+  S.geo = null;
+  clearPreview();
+  S.undo = [];
+  S.redo = [];
+  updateUndo();
   await setBuffer(d);
+  $("file-list").value = "";
   $("saveas-path").value = d.path;
-  status(`new ${category} scenario (unsaved)`);
+  saveError(null);
+  status(map ? `new ${category} scenario on ${map} (unsaved): place the ego's start and destination`
+    : `new ${category} scenario from its template${$("new-actors").checked ? "" : ", no actors"} (unsaved)`);
 }
 
 // -- wiring --------------------------------------------------------------------------------------
 for (const b of document.querySelectorAll("#tools button[data-mode]")) b.addEventListener("click", () => setMode(b.dataset.mode));
-$("file-list").addEventListener("change", (ev) => ev.target.value && openFile(ev.target.value));
-$("btn-save").addEventListener("click", () => S.path && save(S.path, false));
-$("btn-saveas").addEventListener("click", () => save($("saveas-path").value.trim(), true));
+$("file-list").addEventListener("change", guard(async (ev) => {
+  const want = ev.target.value;
+  if (!want) return;
+  if (!mayDiscard("open " + want)) {
+    ev.target.value = S.path || "";
+    return status("kept the unsaved changes", "");
+  }
+  await openFile(want);
+}, "open"));
+$("btn-save").addEventListener("click", guard(() => save(S.path, false), "save"));
+$("btn-saveas").addEventListener("click", guard(() => save($("saveas-path").value.trim(), true), "save as"));
+$("btn-undo").addEventListener("click", guard(undo, "undo"));
+$("btn-redo").addEventListener("click", guard(redo, "redo"));
+$("btn-fit-route").addEventListener("click", () => { fitRoute(); draw(); });
+$("btn-fit-map").addEventListener("click", () => { fitView(); draw(); });
+$("new-map").addEventListener("change", () => { $("new-actors").disabled = !!$("new-map").value; });
+$("driver").addEventListener("change", () => {
+  S.run = null;
+  $("run-result").textContent = "";
+  drawTimeline();
+  schedulePreview();
+});
+window.addEventListener("beforeunload", (ev) => {
+  if (!S.dirty) return undefined;
+  ev.preventDefault();
+  ev.returnValue = "";
+  return "";
+});
+window.addEventListener("unhandledrejection", (ev) => status("error: " + (ev.reason && ev.reason.message), "bad"));
 $("btn-new").addEventListener("click", () => newScenario().catch((e) => status(e.message, "bad")));
 $("btn-run").addEventListener("click", () => runDriver().catch((e) => status(e.message, "bad")));
 $("btn-play").addEventListener("click", () => play().catch((e) => status(e.message, "bad")));
 $("btn-probe").addEventListener("click", () => probe().catch((e) => status(e.message, "bad")));
-$("btn-apply-text").addEventListener("click", async () => {
-  const d = await api("/api/validate", { path: S.path, text: $("toml").value });
+$("btn-apply-text").addEventListener("click", guard(async () => {
+  if (!S.path) return status("open or create a scenario first", "bad");
+  const text = $("toml").value;
+  const before = S.text;
+  const d = await api("/api/validate", { path: S.path, text });
+  remember(before, text);
   S.dirty = true;
-  await setBuffer({ ...d, text: $("toml").value });
-});
+  await setBuffer({ ...d, text });
+  bufferStatus("text applied");
+}, "apply text"));
 $("time").addEventListener("input", () => {
-  $("time-out").textContent = Number($("time").value).toFixed(2);
+  // The label keeps the shown frame's own time until the new frame is in.
   updateNow();
   schedulePreview();
 });
 window.addEventListener("resize", draw);
 
+// A new `#path` in the address bar opens that file (asking first about unsaved edits).
+window.addEventListener("hashchange", guard(async () => {
+  const want = decodeURIComponent(location.hash.slice(1));
+  if (!want || want === S.path) return;
+  if (!mayDiscard("open " + want)) return status("kept the unsaved changes", "");
+  await openFile(want);
+}, "open"));
+
 (async () => {
   busy(0);
-  await refreshFiles();
-  setMode("select");
-  const want = decodeURIComponent(location.hash.slice(1));
-  if (want) await openFile(want);
-  document.body.dataset.ready = "1";
+  updateUndo();
+  try {
+    await refreshFiles();
+    setMode("select");
+    const want = decodeURIComponent(location.hash.slice(1));
+    if (want) await openFile(want);
+  } catch (e) {
+    status(e.message, "bad");
+  } finally {
+    document.body.dataset.ready = "1";
+  }
 })();
