@@ -6,6 +6,7 @@ mod benchmark;
 mod editor;
 mod env;
 mod errors;
+mod facts;
 mod json;
 mod sumo_native;
 mod traffic;
@@ -14,6 +15,7 @@ mod traffic;
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     errors::register(m)?;
+    facts::register(m)?;
     env::register(m)?;
     editor::register(m)?;
     benchmark::register(m)?;
