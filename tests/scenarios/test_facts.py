@@ -5,6 +5,7 @@ of them knows it."""
 
 from __future__ import annotations
 
+import inspect
 import itertools
 import json
 import re
@@ -154,6 +155,11 @@ def test_python_tables_cover_every_value() -> None:
     labels = [report.category_label(c) for c in FACTS["categories"]]
     assert len(set(labels)) == len(labels) and all(lab.startswith("Sce ") for lab in labels)
     assert "destination_reached" in FACTS["termination_reasons"]
+    # The RL reward's terminal penalties name real reasons only (a stale name never matches).
+    from drivehierarchy.baselines.wrappers import terminal_penalty
+
+    named = set(re.findall(r'"([a-z_]+)"', inspect.getsource(terminal_penalty)))
+    assert named - {"collision"} <= set(FACTS["termination_reasons"]), named
     assert tuple(FACTS["traffic_modes"]) == TRAFFIC_MODES
     assert FACTS["tick_s"] == vlm_drive.TICK_S and FACTS["decision_hz"] == rollout.DECISION_HZ == 4.0
     task_ids = [t["id"] for t in _core.openloop_tasks()]

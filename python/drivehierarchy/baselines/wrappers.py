@@ -405,7 +405,7 @@ def terminal_penalty(w: RewardConfig, reason: str | None) -> float:
         return 0.0
     if reason.startswith("collision"):
         return w.collision
-    if reason == "offroad_timeout" or reason == "route_deviation":
+    if reason == "offroad_timeout":  # a route deviation ends as offroad_timeout too
         return w.offroad
     if reason == "blocked_timeout":
         return w.blocked
