@@ -343,11 +343,11 @@ function vclassFor(kind) {
   return K().vclass_of[kind] ?? null;
 }
 
-// The tool bar's kind pickers: moving kinds for actors, every kind for obstacles (moving ones parked).
+// The tool bar's kind pickers: moving kinds for actors, every kind for obstacles (moving ones standing still).
 function fillKindPickers() {
   const opts = (kinds, label) => kinds.map((k) => h("option", { value: k }, label(k)));
   $("actor-kind").replaceChildren(...opts(K().actor_kinds, (k) => k));
-  $("obstacle-kind").replaceChildren(...opts(K().obstacle_kinds, (k) => (K().actor_kinds.includes(k) ? `${k} (parked)` : k)));
+  $("obstacle-kind").replaceChildren(...opts(K().obstacle_kinds, (k) => (K().actor_kinds.includes(k) ? `${k} (static)` : k)));
 }
 
 async function snap(x, y, vclass, internal) {
