@@ -148,7 +148,7 @@ def _validate(args: argparse.Namespace) -> int:
             bad += 1
             print(f"INVALID {exc}")
             continue
-        print(f"ok {f}: {json.dumps(summary, sort_keys=True)}")
+        print(f"ok {f}: {json.dumps(summary, sort_keys=True)}", flush=True)
         old = deprecated_scenario_mode(str(f))
         if old is not None:
             print(f"warning: {old}", file=sys.stderr)

@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 from traffic_helpers import BENCH, frame, make_env, run_expert, traffic_rows, write_scenario
 
 
@@ -113,6 +114,20 @@ def test_idm_traffic_is_deterministic() -> None:
     assert a["traffic"] == b["traffic"] and a["trajectory"] == b["trajectory"]
     assert a["traffic"] != c["traffic"]
     env = make_env(BENCH, traffic="idm")
+    try:
+        assert env.traffic_mode == "idm" and env.reset(seed=0) and env.sim.traffic == "idm"
+    finally:
+        env.close()
+
+
+def test_the_old_mode_name_still_runs_idm_with_a_deprecation_warning(tmp_path: Path) -> None:
+    p = write_scenario(
+        tmp_path,
+        '[ego]\nstart = { lane = "C2T_1", s = 20.0 }\nroute_edges = ["C2T"]\n\n'
+        '[traffic]\nmode = "native"\n[[traffic.vehicles]]\nroute = ["C2T"]\ndepart_s = 0.0\n',
+    )
+    with pytest.warns(DeprecationWarning, match=r"s\.toml: field `traffic\.mode` = 'native' .* use 'idm'"):
+        env = make_env(p)
     try:
         assert env.traffic_mode == "idm" and env.reset(seed=0) and env.sim.traffic == "idm"
     finally:
