@@ -51,6 +51,8 @@ class _Constants(TypedDict):
     behaviors: list[str]
     at_end: list[str]
     chain_events: list[str]
+    start_triggers: list[str]
+    brake_triggers: list[str]
     sign_kinds: list[str]
     depart_lanes: list[str]
     depart_speeds: list[str]

@@ -4,7 +4,7 @@
 //! (`schemars`, i.e. what serde reads), so a new variant shows up here without an edit.
 
 use dh_env::map::VClass;
-use dh_env::scenario::schema::{ActorSpec, AtEndSpec, BehaviorSpec, ChainEventSpec};
+use dh_env::scenario::schema::{ActorSpec, AtEndSpec, BehaviorSpec, BrakeSpec, ChainEventSpec, TriggerSpec};
 use dh_env::scenario::traffic::{LaneChoice, SpeedChoice};
 use dh_env::scenario::{vclass_of, TrafficMode, CATEGORIES, SCENARIO_VERSION};
 use dh_env::score::TerminationReason;
@@ -50,6 +50,18 @@ fn keys<T: JsonSchema>() -> Vec<String> {
         .unwrap_or_default()
 }
 
+/// The keys that pick one of a table's exclusive forms (a start trigger's `time_s`,
+/// `ego_within_m`, ...): the first required key of each `oneOf` alternative of its schema.
+fn alternatives<T: JsonSchema>() -> Vec<String> {
+    let schema = schemars::schema_for!(T).to_value();
+    let alts = schema.get("allOf").and_then(Value::as_array).into_iter().flatten();
+    alts.filter_map(|a| a.get("oneOf").and_then(Value::as_array))
+        .flatten()
+        .filter_map(|alt| alt.pointer("/allOf/0/required/0").and_then(Value::as_str))
+        .map(str::to_owned)
+        .collect()
+}
+
 /// The Rust facts as one plain dict (see `_core.pyi` for its keys).
 #[pyfunction]
 fn constants(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
@@ -80,6 +92,8 @@ fn constants(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     d.set_item("behaviors", names::<BehaviorSpec>())?;
     d.set_item("at_end", names::<AtEndSpec>())?;
     d.set_item("chain_events", names::<ChainEventSpec>())?;
+    d.set_item("start_triggers", alternatives::<TriggerSpec>())?;
+    d.set_item("brake_triggers", alternatives::<BrakeSpec>())?;
     d.set_item("sign_kinds", names::<SignKind>())?;
     d.set_item("depart_lanes", names::<LaneChoice>())?;
     d.set_item("depart_speeds", names::<SpeedChoice>())?;

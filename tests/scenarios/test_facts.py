@@ -45,6 +45,8 @@ EDITOR_KEYS = [
     "depart_speeds",
     "vclass_of",
     "actor_keys",
+    "start_triggers",
+    "brake_triggers",
 ]
 
 
@@ -116,6 +118,17 @@ def test_the_editor_page_takes_every_fact_from_the_server() -> None:
             assert f'"{a}", "{b}"' not in js, (key, a, b)
     vclass_for = js[js.index("function vclassFor(") :]
     assert "K().vclass_of[kind]" in vclass_for[: vclass_for.index("\n}\n")]
+
+
+def test_every_trigger_form_is_the_schemas_and_has_an_editor_default(schema: dict[str, Any]) -> None:
+    for key, definition in (("start_triggers", "TriggerSpec"), ("brake_triggers", "BrakeSpec")):
+        props = schema["definitions"][definition]["properties"]
+        assert FACTS[key] and set(FACTS[key]) <= set(props), key
+    js = EDITOR_JS.read_text(encoding="utf-8")
+    trigger_fields = js[js.index("function triggerFields(") :]
+    # Picking a form in the editor writes that form's default: one per form.
+    for k in {*FACTS["start_triggers"], *FACTS["brake_triggers"]}:
+        assert re.search(rf"\b{k}: \{{ {k}: ", trigger_fields), f"editor.js has no default for trigger `{k}`"
 
 
 def test_the_actor_form_has_a_field_for_every_actor_key() -> None:

@@ -778,13 +778,14 @@ function placeField(label, path, opts) {
   return h("div", { class: "place" }, head, cells);
 }
 
-const TRIGGERS = ["time_s", "ego_within_m", "ego_eta_s", "after"];
-const BRAKES = ["", "at_s", "after_s", "ego_within_m", "ego_gap_m", "ego_gap_s", "ego_ttc_s", "ego_eta_s", "gap_held_s", "after"];
+// The keys that pick a start trigger's / a brake's form (from the simulator, see FACTS).
+const TRIGGERS = () => K().start_triggers;
+const BRAKES = () => ["", ...K().brake_triggers];
 const BRAKE_KEYS = ["decel_mps2", "to_speed_mps", "hold_s"];
 
 function triggerKind(t) {
   if (!t) return "time_s";
-  return TRIGGERS.find((k) => k in t) || "time_s";
+  return TRIGGERS().find((k) => k in t) || "time_s";
 }
 
 function defaultPlace() {
@@ -808,7 +809,7 @@ function triggerPoint(i) {
 function triggerFields(i, prefix, t, choices) {
   const isBrake = prefix[prefix.length - 1] === "brake";
   const box = h("div", { class: "trigger" });
-  const kind = isBrake ? (BRAKES.find((k) => k && t && k in t) || "") : triggerKind(t);
+  const kind = isBrake ? (BRAKES().find((k) => k && t && k in t) || "") : triggerKind(t);
   const sel = h("select", {}, ...choices.map((c) => h("option", { value: c }, c || "(none)")));
   sel.value = kind;
   sel.dataset.path = prefix.join(".") + ".kind";
@@ -842,7 +843,7 @@ function triggerFields(i, prefix, t, choices) {
   if (["ego_within_m", "ego_eta_s"].includes(kind)) {
     box.append(placeField("of", [...prefix, "of"], { pair: true, self: kind === "ego_within_m" || !isBrake, point: () => triggerPoint(i) }));
   }
-  const known = [...TRIGGERS, ...BRAKES.filter(Boolean), "of", "delay_s", "event", ...BRAKE_KEYS];
+  const known = [...TRIGGERS(), ...BRAKES().filter(Boolean), "of", "delay_s", "event", ...BRAKE_KEYS];
   if (isObj(t)) box.append(...extras(t, known, prefix));
   return box;
 }
@@ -901,8 +902,8 @@ function actorForm(a, i) {
       }, { inline: true, floats: true, addLabel: "+ waypoint" }));
   }
   if ("route" in a) fs.append(routeFields([...p, "route"], a.route, vclass));
-  fs.append(triggerFields(i, [...p, "start"], a.start, TRIGGERS));
-  fs.append(triggerFields(i, [...p, "brake"], a.brake, BRAKES));
+  fs.append(triggerFields(i, [...p, "start"], a.start, TRIGGERS()));
+  fs.append(triggerFields(i, [...p, "brake"], a.brake, BRAKES()));
   fs.append(paceFields([...p, "pace"], a.pace));
   if ("route" in a || "lane_changes" in a) {
     fs.append(rows("lane_changes", [...p, "lane_changes"], (lc) => [cell("at_s", [...lc, "at_s"], "number"),
