@@ -234,9 +234,9 @@ def main() -> None:
         f"scenario {args.scenario.name}, one core, no images, seed {args.seed}, "
         f"{'thread CPU' if args.clock == 'cpu' else 'wall'} time, fastest of {args.repeats} runs"
     )
-    print(f"{'':38s} {'µs/tick':>9s} {'ticks/s':>9s} {'vehicles':>9s}")
+    print(f"{'':40s} {'µs/tick':>9s} {'ticks/s':>9s} {'vehicles':>9s}")
     for name, r in rows:
-        print(f"{name:38s} {r['tick_us']:9.1f} {1e6 / r['tick_us']:9.0f} {r['vehicles']:9.1f}")
+        print(f"{name:40s} {r['tick_us']:9.1f} {1e6 / r['tick_us']:9.0f} {r['vehicles']:9.1f}")
     print(
         f"in libsumo alone, beside the step: the ego's moveToXY {alone['move_us']:.1f} µs "
         f"({100 * alone['move_us'] / step:.1f} % of the step); reading the vehicles' subscription "
