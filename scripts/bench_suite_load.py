@@ -16,11 +16,12 @@ starts — those are once-per-process costs and printed on their own:
   `--repeat` more (map cached). The cold surplus is split into the map's parse (timed on a fresh
   copy of the net in the warm process) and the first env's other set-up (init).
 * SUMO (scenarios whose `[traffic]` runs SUMO): the same with the scenario's traffic, on each
-  SUMO backend: `native` (SUMO's C++ library driven from Rust, the env's default when built; its
-  first start in a process loads libsumocpp) and `python` (libsumo). Every reset starts SUMO
-  afresh and runs the warm-up. The Python backend's time is split into `libsumo.start` (SUMO
-  loading the net and the routes), the warm-up's steps and moves, and the rest (our map, demand,
-  subscriptions); the native backend does the same SUMO work.
+  SUMO transport: `libsumo` (SUMO's C++ library driven from Rust, the env's default when built;
+  its first start in a process loads libsumocpp) and `libsumo-python` (the libsumo module; shown
+  as "python"). Every reset starts SUMO afresh and runs the warm-up. The `libsumo-python` time is
+  split into `libsumo.start` (SUMO loading the net and the routes), the warm-up's steps and moves,
+  and the rest (our map, demand, subscriptions); `libsumo` (shown as "native") does the same
+  SUMO work.
 
 Printed: one line per scenario, max / p50 per scenario class (map × traffic mode), the budget
 ratios (measured / budget; > 1 is over), and highway-env's `highway-v0` `gym.make` + `reset()`
@@ -167,7 +168,7 @@ def worker_sumo_python(scenario: str, repeat: int) -> dict[str, Any]:
         parts: dict[str, float] = {}
         clock.take()
         construct, reset = _time_reset(
-            scenario, "sumo", after=functools.partial(_collect, clock, parts), backend="python"
+            scenario, "sumo", after=functools.partial(_collect, clock, parts), backend="libsumo-python"
         )
         total = construct + reset
         start, warmup = parts.get("start", 0.0), parts.get("step", 0.0) + parts.get("move", 0.0)
@@ -194,7 +195,7 @@ def worker_sumo_native(scenario: str, repeat: int) -> dict[str, Any]:
     Its first start in a process loads libsumocpp (part of cold)."""
     import drivehierarchy.envs.r4  # noqa: F401
 
-    runs = [sum(_time_reset(scenario, "sumo", backend="native")) for _ in range(1 + repeat)]
+    runs = [sum(_time_reset(scenario, "sumo", backend="libsumo")) for _ in range(1 + repeat)]
     return {"cold_ms": runs[0], "warm_ms": statistics.median(runs[1:])}
 
 

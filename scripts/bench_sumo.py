@@ -1,13 +1,14 @@
 """Speed of the live background traffic, side by side with libsumo alone.
 
-    python scripts/bench_sumo.py [--scenario PATH] [--ticks N] [--seed S] [--backends native,python,traci]
+    python scripts/bench_sumo.py [--scenario PATH] [--ticks N] [--seed S]
+        [--backends libsumo,libsumo-python,traci]
 
 On one core (the process and its workers are pinned to one CPU), no images, on the same net and
 vehicles; each measurement runs in a fresh worker process (one SUMO copy per process):
 
-1. co-simulation, once per SUMO backend ("native": libsumo's C++ API through the shim, no Python
-   per tick; "python": the libsumo module; "traci", only when asked: SUMO as a subprocess, whose
-   own CPU time the thread clock does not see, so time it with `--clock wall`):
+1. co-simulation, once per SUMO transport ("libsumo": libsumo's C++ API through the shim, no
+   Python per tick; "libsumo-python": the libsumo module; "traci", only when asked: SUMO as a
+   subprocess, whose own CPU time the thread clock does not see, so time it with `--clock wall`):
    `DriveHierarchy-R4` in SUMO mode driven by the expert; only `env.step` is timed (the expert's
    own time is not); the ego's pose of every decision is recorded;
 2. libsumo alone: the same route file and seed, the ego replayed from (1) with `moveToXY`;
@@ -15,12 +16,12 @@ vehicles; each measurement runs in a fresh worker process (one SUMO copy per pro
    `moveToXY` and the reading of the same vehicle subscriptions the Python backend uses;
 3. the world alone: the same scenario with `traffic="none"` and the same expert (what a tick
    costs without any traffic);
-4. the native reactive mode on the same scenario (no SUMO).
+4. the `idm` traffic mode on the same scenario (no SUMO).
 
 Printed: ticks/s of each, each SUMO backend's reset (wall time: SUMO started, warmed up), and
 per backend the sync overhead = co-sim tick − SUMO step − world-alone tick, as a share of SUMO's
 step time (targets: ≥ 2,000 co-simulated ticks/s with
-~50 vehicles, overhead ≤ 25 %, native ≥ 10,000 ticks/s).
+~50 vehicles, overhead ≤ 25 %, idm ≥ 10,000 ticks/s).
 """
 
 from __future__ import annotations
@@ -53,8 +54,7 @@ def run_env(scenario: Path, ticks: int, seed: int, traffic: str, backend: str = 
     )
     if traffic == "sumo":
         # The backend must be the one asked for (no silent fallback in a benchmark).
-        transport = {"native": "libsumo", "python": "libsumo-python", "traci": "traci"}[backend]
-        assert env._sumo is not None and env._sumo.transport == transport, (backend, env._sumo)
+        assert env._sumo is not None and env._sumo.transport == backend, (backend, env._sumo)
     per = env.config.decision_interval_ticks
     spent, done, vehicles, episodes = 0.0, 0, [], 0
     resets: list[float] = []  # wall time: a TraCI SUMO starts in its own process
@@ -203,8 +203,12 @@ def main() -> None:
     ap.add_argument("--scenario", type=Path, default=DEFAULT)
     ap.add_argument("--ticks", type=int, default=4000)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--skip-native", action="store_true", help="skip the native reactive mode")
-    ap.add_argument("--backends", default="native,python", help="SUMO backends to time (native,python,traci)")
+    ap.add_argument("--skip-idm", action="store_true", help="skip the idm traffic mode")
+    ap.add_argument(
+        "--backends",
+        default="libsumo,libsumo-python",
+        help="SUMO transports to time (libsumo,libsumo-python,traci)",
+    )
     ap.add_argument("--repeats", type=int, default=3, help="runs per measurement (the fastest counts)")
     ap.add_argument("--clock", choices=("cpu", "wall"), default="cpu", help="thread CPU time or wall time")
     ap.add_argument("--quick", action="store_true", help="smoke run (CI): 200 ticks, one run each")
@@ -215,27 +219,27 @@ def main() -> None:
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     iso = functools.partial(_isolated, args.clock, args.repeats)
     backends = [b.strip() for b in args.backends.split(",") if b.strip()]
-    if "native" not in backends:
-        ap.error("--backends: 'native' is needed (its ego track drives libsumo alone)")
+    if "libsumo" not in backends:
+        ap.error("--backends: 'libsumo' is needed (its ego track drives libsumo alone)")
     cosims = {b: iso(run_env, args.scenario, args.ticks, args.seed, "sumo", b) for b in backends}
-    alone = iso(run_sumo_alone, args.scenario, args.seed, cosims["native"]["ego_track"])
+    alone = iso(run_sumo_alone, args.scenario, args.seed, cosims["libsumo"]["ego_track"])
     world = iso(run_env, args.scenario, args.ticks, args.seed, "none")
-    native = None if args.skip_native else iso(run_env, args.scenario, args.ticks, args.seed, "native")
+    idm = None if args.skip_idm else iso(run_env, args.scenario, args.ticks, args.seed, "idm")
     rows = [
         ("libsumo alone (simulationStep)", alone),
-        *((f"co-simulation, {b} SUMO backend", cosims[b]) for b in backends),
+        *((f"co-simulation, {b} transport", cosims[b]) for b in backends),
         ("world alone (traffic none)", world),
     ]
-    if native is not None:
-        rows.append(("native reactive mode (no SUMO)", native))
+    if idm is not None:
+        rows.append(("idm traffic mode (no SUMO)", idm))
     step = alone["tick_us"]
     print(
         f"scenario {args.scenario.name}, one core, no images, seed {args.seed}, "
         f"{'thread CPU' if args.clock == 'cpu' else 'wall'} time, fastest of {args.repeats} runs"
     )
-    print(f"{'':38s} {'µs/tick':>9s} {'ticks/s':>9s} {'vehicles':>9s}")
+    print(f"{'':40s} {'µs/tick':>9s} {'ticks/s':>9s} {'vehicles':>9s}")
     for name, r in rows:
-        print(f"{name:38s} {r['tick_us']:9.1f} {1e6 / r['tick_us']:9.0f} {r['vehicles']:9.1f}")
+        print(f"{name:40s} {r['tick_us']:9.1f} {1e6 / r['tick_us']:9.0f} {r['vehicles']:9.1f}")
     print(
         f"in libsumo alone, beside the step: the ego's moveToXY {alone['move_us']:.1f} µs "
         f"({100 * alone['move_us'] / step:.1f} % of the step); reading the vehicles' subscription "
@@ -246,7 +250,7 @@ def main() -> None:
         c = cosims[b]
         overhead = c["tick_us"] - step - world["tick_us"]
         print(
-            f"  {b:6s} backend: {overhead:6.1f} µs = {100 * overhead / step:5.1f} % of SUMO's step; "
+            f"  {b:14s}: {overhead:6.1f} µs = {100 * overhead / step:5.1f} % of SUMO's step; "
             f"co-sim / SUMO alone {c['tick_us'] / step:.2f}×; {1e6 / c['tick_us']:.0f} co-simulated ticks/s "
             "(target ≥ 2,000 with ~50 vehicles)"
         )
@@ -254,10 +258,8 @@ def main() -> None:
         "reset (SUMO started on the episode's seed, warm-up), wall time, fastest: "
         + ", ".join(f"{b} {cosims[b]['reset_ms']:.0f} ms" for b in backends)
     )
-    if native is not None:
-        print(
-            f"native reactive mode ticks/s {1e6 / native['tick_us']:.0f} (target ≥ 10,000 with 50 vehicles)"
-        )
+    if idm is not None:
+        print(f"idm traffic mode ticks/s {1e6 / idm['tick_us']:.0f} (target ≥ 10,000 with 50 vehicles)")
 
 
 if __name__ == "__main__":

@@ -201,8 +201,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--distinct", type=int, default=300, help="distinct in-process tasks, cycled (300)")
     ap.add_argument(
         "--backends",
-        default="native,python",
-        help="SUMO transports of the in-process episodes, comma-separated (native,python; also traci)",
+        default="libsumo,libsumo-python",
+        help="SUMO transports of the in-process episodes, comma-separated "
+        "(libsumo,libsumo-python; also traci)",
     )
     ap.add_argument("--out", type=Path, default=Path("runs/soak"))
     ap.add_argument(
@@ -215,10 +216,10 @@ def main(argv: list[str] | None = None) -> int:
         a.episodes, a.round, a.vlm_share, a.distinct, a.jobs = 8, 4, 0.25, 3, 1
     backends = tuple(b.strip() for b in a.backends.split(",") if b.strip())
     for b in backends:
-        if b not in ("native", "python", "traci"):
-            ap.error(f"--backends: {b!r} is not one of native, python, traci")
+        if b not in ("libsumo", "libsumo-python", "traci"):
+            ap.error(f"--backends: {b!r} is not one of libsumo, libsumo-python, traci")
     if not backends:
-        ap.error("--backends: name at least one of native, python, traci")
+        ap.error("--backends: name at least one of libsumo, libsumo-python, traci")
     a.out.mkdir(parents=True, exist_ok=True)
     log_file = (a.out / "soak.log").open("a", encoding="utf-8")
 

@@ -70,7 +70,7 @@ def env_episode(scenario: Path, variant: str) -> None:
     if variant == "none":
         kw["traffic"] = "none"
     else:
-        kw["sumo_backend"] = {"shim": "native", "module": "python", "traci": "traci"}[variant]
+        kw["sumo_backend"] = {"shim": "libsumo", "module": "libsumo-python", "traci": "traci"}[variant]
     env = DriveHierarchyR4Env(scenario=str(scenario), **kw)
     try:
         env.reset(seed=0)

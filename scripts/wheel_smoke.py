@@ -1,7 +1,7 @@
 """Smoke test of an installed wheel, run from a venv with no Rust toolchain (scripts/wheel_check.sh).
 
 1. `gym.make` + reset + step with images;
-2. a SUMO scenario on the native backend, with no fallback warning;
+2. a SUMO scenario on the libsumo transport, with no fallback warning;
 3. `drivehierarchy r4 evaluate --agent expert` on one category;
 4. `drivehierarchy openloop score` on the released open-loop samples (answered with their own
    ground truth: every scored task must get the full score).
@@ -73,13 +73,13 @@ def main() -> None:
             scenario="06_traffic_flow/bs3d_09_left_turner_queue",
             front=None,
             bev=None,
-            sumo_backend="native",
+            sumo_backend="libsumo",
         )
         env.reset(seed=0)
         for _ in range(20):
             env.step(env.unwrapped.expert_action())
         transport = env.unwrapped._sumo.transport
-        check(transport == "libsumo", f"SUMO scenario runs on the native shim (transport {transport})")
+        check(transport == "libsumo", f"SUMO scenario runs on the libsumo shim (transport {transport})")
         check(np.isfinite(env.unwrapped.score()["score_route"]), "SUMO scenario stepped")
         env.close()
     check(not [w for w in caught if "SUMO" in str(w.message)], "no SUMO fallback warning")

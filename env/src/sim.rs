@@ -488,7 +488,7 @@ impl Sim {
         self.traffic = model;
     }
 
-    /// Name of the traffic model in use ("sumo", "native"), if any.
+    /// Name of the traffic model in use ("sumo", "idm"), if any.
     pub fn traffic_name(&self) -> Option<&str> {
         match &self.traffic {
             Some(m) => Some(m.name()),

@@ -13,8 +13,54 @@ OPENLOOP_UNICODE_VERSION: Final[str]
 class DriveHierarchyError(Exception): ...
 class SimulationError(DriveHierarchyError): ...
 class RenderError(DriveHierarchyError): ...
-class ScenarioError(DriveHierarchyError, ValueError): ...
-class ConfigError(DriveHierarchyError, ValueError): ...
+
+class ScenarioError(DriveHierarchyError, ValueError):
+    """Bad scenario input; the attributes say where (None where the core error does not know)."""
+
+    file: str | None
+    line: int | None
+    column: int | None
+    field: str | None
+    value: str | None
+    reason: str | None
+
+class ConfigError(DriveHierarchyError, ValueError):
+    """Bad runtime setting or action (same attributes as `ScenarioError`)."""
+
+    file: str | None
+    line: int | None
+    column: int | None
+    field: str | None
+    value: str | None
+    reason: str | None
+
+class _Constants(TypedDict):
+    tick_s: float
+    ticks_per_decision: int
+    decision_hz: float
+    warmup_ticks: int
+    scenario_version: int
+    categories: list[str]
+    termination_reasons: list[str]
+    openloop_tasks: list[str]
+    kinds: list[str]
+    actor_kinds: list[str]
+    obstacle_kinds: list[str]
+    vclass_of: dict[str, str]
+    actor_keys: list[str]
+    behaviors: list[str]
+    at_end: list[str]
+    chain_events: list[str]
+    start_triggers: list[str]
+    brake_triggers: list[str]
+    sign_kinds: list[str]
+    depart_lanes: list[str]
+    depart_speeds: list[str]
+    traffic_modes: list[str]
+    deprecated_traffic_modes: dict[str, str]
+
+def constants() -> _Constants:
+    """The Rust facts (step length, categories, scenario enums, ...) as one plain dict."""
 
 @final
 class Frame:
@@ -72,7 +118,7 @@ class Sim:
     def ego_array(self) -> NDArray[np.float64]: ...
     def light_states(self) -> list[tuple[str, str, str]]: ...
 
-NATIVE_SUMO_SHIM: Final[str]
+LIBSUMO_SUMO_SHIM: Final[str]
 TRACI_SUMO_SHIM: Final[str]
 
 @final

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import tomllib
 from pathlib import Path
 from typing import Any
 
 from drivehierarchy import DriveHierarchyError, _core
 from drivehierarchy._core import ConfigError
+from drivehierarchy.envs.traffic.modes import TRAFFIC_MODES, deprecated_scenario_mode, traffic_mode_arg
 from drivehierarchy.scenarios import builtin_scenarios, resolve_scenario, scenario_id, sumo_home
 from drivehierarchy.suite_probe import SWEEP
 
@@ -83,7 +85,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     pr.add_argument("--seeds", default="0-4", help="seeds, e.g. 0-4 (default) or 0,3")
     pr.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     pr.add_argument(
-        "--traffic", choices=["sumo", "native", "none"], help="override every scenario's traffic mode"
+        "--traffic",
+        type=traffic_mode_arg,
+        metavar="{" + ",".join(TRAFFIC_MODES) + "}",
+        help="override every scenario's traffic mode",
     )
     pr.add_argument(
         "--results", type=Path, help="merge the episodes into this CSV (e.g. docs/suite_probe.csv)"
@@ -143,7 +148,10 @@ def _validate(args: argparse.Namespace) -> int:
             bad += 1
             print(f"INVALID {exc}")
             continue
-        print(f"ok {f}: {json.dumps(summary, sort_keys=True)}")
+        print(f"ok {f}: {json.dumps(summary, sort_keys=True)}", flush=True)
+        old = deprecated_scenario_mode(str(f))
+        if old is not None:
+            print(f"warning: {old}", file=sys.stderr)
     return 1 if bad else 0
 
 

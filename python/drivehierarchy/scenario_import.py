@@ -38,6 +38,7 @@ import tomlkit
 from tomlkit.items import InlineTable, Table
 from tomlkit.toml_document import TOMLDocument
 
+from drivehierarchy import _core
 from drivehierarchy._core import ConfigError, Network, OrientedBox, ScenarioError
 
 if TYPE_CHECKING:
@@ -53,20 +54,9 @@ COORD_TOLERANCE_M = 0.05
 # A start or destination moved by more than this to land on its lane is reported.
 SNAP_REPORT_M = 0.5
 
-# Our categories (CATEGORIES in env/src/scenario/schema.rs) by the original's folder number; the
-# original's folder names differ (`01_pedestrain_recognition`, `03_right_turn`, ...).
-CATEGORY_BY_NUMBER = {
-    "01": "01_pedestrian",
-    "02": "02_obstacles",
-    "03": "03_turning",
-    "04": "04_intersection",
-    "05": "05_t_intersection",
-    "06": "06_traffic_flow",
-    "07": "07_sudden_brake",
-    "08": "08_merging",
-    "09": "09_yielding",
-    "10": "10_roundabout",
-}
+# Our categories (`_core.constants()`) by the original's folder number; the original's folder
+# names differ (`01_pedestrain_recognition`, `03_right_turn`, ...).
+CATEGORY_BY_NUMBER = {c.split("_", 1)[0]: c for c in _core.constants()["categories"]}
 
 # Our shipped vehicle types (scenarios/traffic/vtypes.add.xml) by SUMO class, used only when no
 # vehicle-type file of the original is available.

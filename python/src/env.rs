@@ -266,8 +266,8 @@ impl PySim {
         self.inner.trajectory_hash().map_err(|e| err(py, e))
     }
 
-    /// Background traffic from the next `reset` on: `"none"`, `"native"` (the Rust IDM model),
-    /// or `"sumo"` with `sumo` = the `SumoSession` to run SUMO on (`envs.traffic.native`).
+    /// Background traffic from the next `reset` on: `"none"`, `"idm"` (the Rust IDM model),
+    /// or `"sumo"` with `sumo` = the `SumoSession` to run SUMO on (`envs.traffic.transport`).
     #[pyo3(signature = (mode, sumo=None))]
     fn set_traffic(&mut self, py: Python<'_>, mode: &str, sumo: Option<Py<PyAny>>) -> PyResult<()> {
         let session = match (mode, &sumo) {
@@ -278,7 +278,7 @@ impl PySim {
         };
         let model: Option<Box<dyn dh_env::world::TrafficModel>> = match (mode, sumo, session) {
             ("none", None, _) => None,
-            ("native", None, _) => Some(Box::new(
+            ("idm", None, _) => Some(Box::new(
                 dh_env::world::idm::IdmTraffic::new(self.inner.scenario()).map_err(|e| err(py, e))?,
             )),
             ("sumo", Some(_), Some(session)) => {
@@ -287,8 +287,8 @@ impl PySim {
             (m, s, _) => {
                 let why = match m {
                     "sumo" => "mode 'sumo' needs a SumoSession",
-                    "none" | "native" => "only mode 'sumo' takes a SUMO object",
-                    _ => "expected 'sumo', 'native' or 'none'",
+                    "none" | "idm" => "only mode 'sumo' takes a SUMO object",
+                    _ => "expected 'sumo', 'idm' or 'none'",
                 };
                 let value = if s.is_some() { format!("{m} (with a SUMO object)") } else { m.to_string() };
                 return Err(err(py, dh_env::Error::config("traffic", value, why)));
@@ -304,7 +304,7 @@ impl PySim {
         self.inner.scenario().traffic.mode.as_str()
     }
 
-    /// The traffic model in use ("sumo", "native") or None.
+    /// The traffic model in use ("sumo", "idm") or None.
     #[getter]
     fn traffic(&self) -> Option<String> {
         self.inner.traffic_name().map(str::to_owned)
@@ -643,7 +643,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyFrame>()?;
     m.add_class::<PyGifWriter>()?;
     m.add_class::<PySumoSession>()?;
-    m.add("NATIVE_SUMO_SHIM", dh_env::world::sumo::shim::SHIM_FILE)?;
+    m.add("LIBSUMO_SUMO_SHIM", dh_env::world::sumo::shim::SHIM_FILE)?;
     m.add("TRACI_SUMO_SHIM", dh_env::world::sumo::shim::TRACI_SHIM_FILE)?;
     m.add_function(wrap_pyfunction!(rescore, m)?)?;
     m.add_function(wrap_pyfunction!(validate_scenario, m)?)?;

@@ -6,6 +6,7 @@ mod benchmark;
 mod editor;
 mod env;
 mod errors;
+mod facts;
 mod json;
 mod network;
 mod sumo_native;
@@ -15,6 +16,7 @@ mod traffic;
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     errors::register(m)?;
+    facts::register(m)?;
     env::register(m)?;
     editor::register(m)?;
     benchmark::register(m)?;

@@ -1,5 +1,5 @@
 //! `drivehierarchy._core.SumoSession`: the handle on one SUMO co-simulation's session, handed to
-//! `Sim.set_traffic("sumo", ...)` (`envs/traffic/native.py` builds it). The orchestration and the
+//! `Sim.set_traffic("sumo", ...)` (`envs/traffic/transport.py` builds it). The orchestration and the
 //! C++ shim transports live in `dh_env::world::sumo`; the `libsumo` Python module's transport
 //! (the fallback) in `traffic.rs`.
 

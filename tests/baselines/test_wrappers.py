@@ -243,6 +243,6 @@ def test_sumo_scenarios_share_the_process_simulation_or_get_a_process_each() -> 
         assert np.all(np.isfinite(obs)) and rew.shape == (2,)
     finally:
         venv.close()
-    venv = make_vec_env([flow, brake], WrapperConfig(traffic="native"), 2, vec="dummy")
+    venv = make_vec_env([flow, brake], WrapperConfig(traffic="idm"), 2, vec="dummy")
     venv.reset()
     venv.close()

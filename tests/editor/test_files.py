@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from drivehierarchy.editor.files import PathRefused, apply_edits, confine, parse_error
+from drivehierarchy.editor.files import PathRefused, apply_edits, confine, error_fields
 
 TEXT = """version = 1   # schema
 id = "t"
@@ -47,8 +47,8 @@ def test_append_and_delete() -> None:
 
 
 def test_a_key_of_a_missing_table_makes_the_table() -> None:
-    out = apply_edits(TEXT, [{"path": ["traffic", "mode"], "value": "native"}])
-    assert out == TEXT + '\n[traffic]\nmode = "native"\n' or out.endswith('[traffic]\nmode = "native"\n')
+    out = apply_edits(TEXT, [{"path": ["traffic", "mode"], "value": "idm"}])
+    assert out == TEXT + '\n[traffic]\nmode = "idm"\n' or out.endswith('[traffic]\nmode = "idm"\n')
     assert apply_edits(out, [{"path": ["traffic", "mode"], "delete": True}]).startswith(TEXT)
 
 
@@ -152,11 +152,31 @@ def test_bad_edits_are_refused_with_the_path(edit: dict) -> None:
         apply_edits(TEXT, [edit])
 
 
-def test_parse_error_splits_the_validators_message() -> None:
-    e = parse_error("a/b.toml:19:13: field `actors[0].speed_mps` = -1: must be a finite number ≥ 0")
-    assert (e["field"], e["value"], e["line"], e["column"]) == ("actors[0].speed_mps", "-1", 19, 13)
-    assert e["reason"] == "must be a finite number ≥ 0"
-    assert parse_error("something else")["field"] is None
+def test_error_fields_are_the_core_errors_attributes(tmp_path: Path) -> None:
+    from drivehierarchy import ScenarioError, _core
+
+    p = tmp_path / "sub" / "b.toml"
+    p.parent.mkdir()
+    p.write_text(
+        'version = 1\nid = "b"\ncategory = "no_such"\nmap = "builtin:town01"\n\n[ego]\n'
+        'start = { lane = "C2T_1", s = 20.0 }\ndestination = { lane = "C2T_1", s = 330.0 }\n',
+        encoding="utf-8",
+    )
+    with pytest.raises(ScenarioError) as info:
+        _core.validate_scenario(str(p))
+    e = error_fields(info.value, tmp_path)
+    assert (e["file"], e["field"], e["value"], e["line"], e["column"]) == (
+        "sub/b.toml",
+        "category",
+        "no_such",
+        3,
+        12,
+    )
+    assert e["reason"].startswith("must be one of 01_pedestrian")
+    assert e["message"].startswith("sub/b.toml:3:") and e["reason"] in e["message"]
+    # An error without a location (raised from Python) has None fields, not a guess from its text.
+    e = error_fields(ScenarioError("a/b.toml:19:13: field `x` = 1: looks located"))
+    assert (e["field"], e["line"], e["file"]) == (None, None, None)
 
 
 def test_confine(tmp_path: Path) -> None:

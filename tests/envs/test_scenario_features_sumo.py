@@ -2,9 +2,9 @@
 drive SUMO's signals with the same timing as the world's own light model, and per-vehicle
 `max_speed_mps` / `speed_factor` of `[traffic]` reach SUMO's vehicles.
 
-Real libsumo (both SUMO backends: "native", libsumo's C++ API from Rust, and "python", the
-libsumo module) on the project's town01 network; the ego drives east on C2T, away from light C,
-whose west approach (W2C_1) is watched.
+Real libsumo (both in-process SUMO transports: "libsumo", libsumo's C++ API from Rust, and
+"libsumo-python", the libsumo module) on the project's town01 network; the ego drives east on
+C2T, away from light C, whose west approach (W2C_1) is watched.
 """
 
 from __future__ import annotations
@@ -69,7 +69,7 @@ def _head(env: object) -> str:
     return {lane: c for _, lane, c in env.sim.light_states()}["W2C_1"]  # type: ignore[attr-defined]
 
 
-@pytest.fixture(params=["native", "python"])
+@pytest.fixture(params=["libsumo", "libsumo-python"])
 def backend(request: pytest.FixtureRequest) -> str:
     return str(request.param)
 
@@ -98,7 +98,7 @@ def _switches(timeline: list[tuple[float, str]]) -> list[tuple[float, str]]:
 
 
 @pytest.mark.parametrize("kind", sorted(LIGHTS))
-def test_light_override_timing_matches_in_sumo_and_native(tmp_path: Path, kind: str, backend: str) -> None:
+def test_light_override_timing_matches_in_sumo_and_the_world(tmp_path: Path, kind: str, backend: str) -> None:
     p = write_scenario(tmp_path, EGO + LIGHTS[kind] + TRAFFIC)
     sumo, _ = _timeline(p, "sumo", 26.0, backend)
     own, _ = _timeline(p, "none", 26.0)

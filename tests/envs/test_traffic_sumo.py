@@ -2,7 +2,7 @@
 
 Every test starts the real SUMO of the `eclipse-sumo` / `libsumo` packages on the project's
 town01 network (or the suite's Ingolstadt net) and drives the real Rust world, once per SUMO
-backend: "native" (libsumo's C++ API driven from Rust) and "python" (the libsumo module).
+transport: "libsumo" (libsumo's C++ API driven from Rust) and "libsumo-python" (the libsumo module).
 """
 
 from __future__ import annotations
@@ -23,14 +23,14 @@ from traffic_helpers import BENCH, IS_TRAFFIC, frame, make_env, run_expert, traf
 
 from drivehierarchy import _core
 from drivehierarchy._core import ConfigError, ScenarioError, SimulationError
-from drivehierarchy.envs.traffic import native
+from drivehierarchy.envs.traffic import transport
 from drivehierarchy.scenarios import sumo_home
 from drivehierarchy.testing.procs import process_table
 
 FLOW_SCENARIO = "06_traffic_flow/ingolstadt_06_westbound_flow"
 
 
-@pytest.fixture(params=["native", "python"])
+@pytest.fixture(params=["libsumo", "libsumo-python"])
 def backend(request: pytest.FixtureRequest) -> str:
     return str(request.param)
 
@@ -97,7 +97,7 @@ def test_config_overrides_the_scenario_mode(tmp_path: Path, backend: str) -> Non
 
 # Over TraCI too, where SUMO may open its port and then fail loading its inputs: the message
 # must still carry SUMO's own error log (the shim waits for SUMO to exit before it is read).
-@pytest.mark.parametrize("backend", ["native", "python", "traci"])
+@pytest.mark.parametrize("backend", ["libsumo", "libsumo-python", "traci"])
 def test_sumo_start_failure_carries_sumos_message(tmp_path: Path, backend: str) -> None:
     (tmp_path / "bad.add.xml").write_text(
         '<additional><vType id="car" carFollowModel="NoSuchModel"/></additional>', encoding="utf-8"
@@ -278,11 +278,11 @@ def test_builtin_traffic_flow_scenario_runs_on_sumo_by_default(backend: str) -> 
 def test_every_transport_gives_the_same_traffic() -> None:
     # One orchestration (command line, warm-up, movers, departure keys, vehicle order) over
     # libsumo (shim), the libsumo module and TraCI: bit-identical.
-    native = run_expert(BENCH, seed=5, steps=60, sumo_backend="native")
-    for other in ("python", "traci"):
+    shim = run_expert(BENCH, seed=5, steps=60, sumo_backend="libsumo")
+    for other in ("libsumo-python", "traci"):
         run = run_expert(BENCH, seed=5, steps=60, sumo_backend=other)
-        assert native["counts"] == run["counts"], other
-        assert native["traffic"] == run["traffic"] and native["trajectory"] == run["trajectory"], other
+        assert shim["counts"] == run["counts"], other
+        assert shim["traffic"] == run["traffic"] and shim["trajectory"] == run["trajectory"], other
 
 
 def _sumo_children() -> set[int]:
@@ -326,7 +326,7 @@ def test_auto_runs_a_second_sumo_env_of_the_process_on_traci() -> None:
         b.close()
 
 
-def test_native_backend_is_the_default_and_a_missing_shim_falls_back(
+def test_libsumo_transport_is_the_default_and_a_missing_shim_falls_back(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:
     env = make_env(BENCH)
@@ -335,25 +335,26 @@ def test_native_backend_is_the_default_and_a_missing_shim_falls_back(
     finally:
         env.close()
     # A build without SUMO's headers has no shim: "auto" says so once and uses the Python backend.
-    _, lib, binary = native.native_sumo_paths()
-    missing = tmp_path / _core.NATIVE_SUMO_SHIM
-    monkeypatch.setattr(native, "native_sumo_paths", lambda: (missing, lib, binary))
-    with caplog.at_level(logging.WARNING, logger=native.__name__):
-        assert native.make_sumo_traffic("auto").transport == "libsumo-python"
-    assert str(missing) in caplog.text and "Python libsumo backend" in caplog.text, caplog.text
+    _, lib, binary = transport.libsumo_paths()
+    missing = tmp_path / _core.LIBSUMO_SUMO_SHIM
+    monkeypatch.setattr(transport, "libsumo_paths", lambda: (missing, lib, binary))
+    with caplog.at_level(logging.WARNING, logger=transport.__name__):
+        assert transport.make_sumo_traffic("auto").transport == "libsumo-python"
+    assert str(missing) in caplog.text and "libsumo-python transport" in caplog.text, caplog.text
     with pytest.raises(SimulationError, match="was not built"):
-        native.make_sumo_traffic("native")
+        transport.make_sumo_traffic("libsumo")
     with pytest.raises(ConfigError, match="sumo_backend"):
         make_env(BENCH, sumo_backend="cpp")
 
 
-def test_native_backend_loads_sumo_only_when_started_and_never_the_python_module() -> None:
-    # Importing drivehierarchy pulls no SUMO library in; a native SUMO env loads libsumocpp
+def test_libsumo_transport_loads_sumo_only_when_started_and_never_the_python_module() -> None:
+    # Importing drivehierarchy pulls no SUMO library in; a SUMO env on `libsumo` loads libsumocpp
     # (and the shim) but never the libsumo module: one SUMO copy per simulation.
     code = (
         "import sys; sys.path.insert(0, sys.argv[1]); import traffic_helpers as t; "
         "maps = lambda: open('/proc/self/maps').read(); before = maps(); "
-        "env = t.make_env(t.BENCH, sumo_backend='native'); env.reset(seed=0); env.step(env.expert_action()); "
+        "env = t.make_env(t.BENCH, sumo_backend='libsumo'); env.reset(seed=0); "
+        "env.step(env.expert_action()); "
         "after = maps(); env.close(); "
         "print('libsumocpp' in before, 'libsumocpp' in after, '_dh_sumo_shim' in after, "
         "'_libsumo' in after, 'libsumo' in sys.modules)"
@@ -368,15 +369,15 @@ def test_native_backend_loads_sumo_only_when_started_and_never_the_python_module
     assert res.stdout.split() == ["False", "True", "True", "False", "False"], res.stdout + res.stderr
 
 
-def test_python_and_native_backends_share_one_simulation_per_process() -> None:
-    a, b = make_env(BENCH, sumo_backend="native"), make_env(BENCH, sumo_backend="python")
+def test_libsumo_and_libsumo_python_share_one_simulation_per_process() -> None:
+    a, b = make_env(BENCH, sumo_backend="libsumo"), make_env(BENCH, sumo_backend="libsumo-python")
     try:
         a.reset(seed=0)
         with pytest.raises(SimulationError, match="one simulation per process"):
             b.reset(seed=0)
         a.close()
         b.reset(seed=0)
-        a = make_env(BENCH, sumo_backend="native")
+        a = make_env(BENCH, sumo_backend="libsumo")
         with pytest.raises(SimulationError, match="one simulation per process"):
             a.reset(seed=0)
     finally:
@@ -398,7 +399,7 @@ def test_backends_agree_with_mirrored_scenario_actors(tmp_path: Path) -> None:
     )
     p = write_scenario(tmp_path, body)
     runs = {}
-    for backend in ("native", "python"):
+    for backend in ("libsumo", "libsumo-python"):
         env = make_env(p, sumo_backend=backend)
         try:
             env.reset(seed=2)
@@ -414,6 +415,6 @@ def test_backends_agree_with_mirrored_scenario_actors(tmp_path: Path) -> None:
             runs[backend] = (digest, env.sim.trajectory_hash, scripted, vehicles)
         finally:
             env.close()
-    assert runs["native"][0] == runs["python"][0] and runs["native"][1] == runs["python"][1]
-    _, _, scripted, vehicles = runs["native"]
+    assert runs["libsumo"][0] == runs["libsumo-python"][0] and runs["libsumo"][1] == runs["libsumo-python"][1]
+    _, _, scripted, vehicles = runs["libsumo"]
     assert vehicles >= 3 and scripted[0] > scripted[-1], (vehicles, scripted[0], scripted[-1])

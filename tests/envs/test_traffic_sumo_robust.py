@@ -30,7 +30,7 @@ TERMINATIONS = {
 }
 
 
-@pytest.fixture(params=["native", "python", "traci"])
+@pytest.fixture(params=["libsumo", "libsumo-python", "traci"])
 def backend(request: pytest.FixtureRequest) -> str:
     return str(request.param)
 
@@ -70,10 +70,10 @@ def test_noisy_expert_ends_with_a_protocol_termination_on_both_backends() -> Non
     # to road is 100.43"). With the expert of issue 16 item 9 that run leaves the road earlier
     # (offroad timeout at decision 60); noise seed 3 drives on, off its route, past that point.
     for seed in (0, 3):
-        runs = {b: noisy_expert(b, noise_seed=seed) for b in ("native", "python", "traci")}
-        assert runs["native"]["reason"] in TERMINATIONS, runs
-        assert runs["native"] == runs["python"] == runs["traci"]
-    assert runs["native"]["decisions"] > 111, runs
+        runs = {b: noisy_expert(b, noise_seed=seed) for b in ("libsumo", "libsumo-python", "traci")}
+        assert runs["libsumo"]["reason"] in TERMINATIONS, runs
+        assert runs["libsumo"] == runs["libsumo-python"] == runs["traci"]
+    assert runs["libsumo"]["decisions"] > 111, runs
 
 
 def test_full_lock_off_the_network_steps_to_a_termination(backend: str) -> None:
@@ -106,7 +106,7 @@ def test_a_body_sumo_cannot_place_leaves_sumo_and_comes_back(monkeypatch: pytest
         real(vid, *args)
 
     monkeypatch.setattr(libsumo.vehicle, "moveToXY", move)
-    env = make_env(BENCH, sumo_backend="python", decision_interval_ticks=1)
+    env = make_env(BENCH, sumo_backend="libsumo-python", decision_interval_ticks=1)
     try:
         env.reset(seed=0)
         for _ in range(5):

@@ -41,7 +41,7 @@ def run(venv: gym.vector.VectorEnv[Any, Any], steps: int) -> list[np.ndarray]:
     return states
 
 
-@pytest.mark.parametrize("backend", ["native", "python"])
+@pytest.mark.parametrize("backend", ["libsumo", "libsumo-python"])
 def test_async_vector_env_runs_four_sumo_envs(backend: str) -> None:
     venv = gym.vector.AsyncVectorEnv([functools.partial(make_env, backend)] * N)
     try:

@@ -1,4 +1,4 @@
-"""Shared by the SUMO and native traffic tests: scenario files, envs, traffic rows, an expert run."""
+"""Shared by the SUMO and IDM traffic tests: scenario files, envs, traffic rows, an expert run."""
 
 from __future__ import annotations
 

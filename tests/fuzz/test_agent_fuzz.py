@@ -1,5 +1,5 @@
 """Built for bad drivers: every suite scenario × the bad drivers of `drivehierarchy.testing.bad_agents`,
-on both SUMO backends where the scenario runs SUMO (1,664 episodes in worker processes).
+on both in-process SUMO transports where the scenario runs SUMO (1,664 episodes in worker processes).
 
 Every episode must end with a protocol termination (no exception from `step`), and re-scoring its
 episode log (`r4 rescore`, the Rust replay) must give the record the run produced. Episodes end
@@ -55,14 +55,14 @@ def fuzz_tasks() -> list[tuple[str, str, int, str, bool]]:
     first_of_category = {p for p in files if p == min(q for q in files if q.parent == p.parent)}
     tasks = []
     for p in files:
-        backends = ["native", "python"] if _runs_sumo(p) else ["native"]
+        backends = ["libsumo", "libsumo-python"] if _runs_sumo(p) else ["libsumo"]
         for kind in KINDS:
             if kind in SAMPLED and p not in first_of_category:
                 continue
             tasks += [(str(p), kind, 0, b, False) for b in backends]
     by_id = {scenario_id(p): p for p in files}
     for sid, kind in WITH_IMAGES:
-        tasks += [(str(by_id[sid]), kind, 0, "native", True)]
+        tasks += [(str(by_id[sid]), kind, 0, "libsumo", True)]
     return tasks
 
 

@@ -24,7 +24,7 @@ def test_the_build_compiles_against_the_sumo_it_runs_with() -> None:
         r for r in PROJECT["project"]["dependencies"] if _name(r) in ("eclipse-sumo", "libsumo", "sumolib")
     ]
     build = [r for r in PROJECT["build-system"]["requires"] if _name(r) == "eclipse-sumo"]
-    assert build, "eclipse-sumo must be a build requirement (the native shim's headers)"
+    assert build, "eclipse-sumo must be a build requirement (the SUMO shims' headers)"
     assert build[0] in pins
     assert len({p.split("==")[1] for p in pins}) == 1, pins
 

@@ -86,7 +86,7 @@ impl TrafficDemand {
                 FlowRate::Probability(p) => format!("probability=\"{p}\""),
             };
             // SUMO takes `end` or `number`, not both: a capped flow gets the departures that
-            // fall before `end` as its `number` (as the native model counts them).
+            // fall before `end` as its `number` (as the `idm` model counts them).
             let end_or_number = match (f.number, f.rate) {
                 (Some(n), FlowRate::PerHour(v)) => {
                     let before_end = ((f.end_s - f.begin_s) * v / 3600.0 - 1e-9).ceil().max(1.0) as u32;

@@ -2,7 +2,7 @@
 //!
 //! Demand is resolved here once (vehicle types, routes over the map) and realised per episode
 //! seed into explicit vehicles: SUMO gets them as a route file ([`TrafficDemand::sumo_routes_xml`]),
-//! the native model ([`crate::world::idm`]) spawns them itself. Random trips are drawn here with
+//! the `idm` model ([`crate::world::idm`]) spawns them itself. Random trips are drawn here with
 //! a seeded generator, so both modes see the same vehicles, routes and departure places.
 
 /// Re-exported at its old path (moved to [`super::sumo_routes`], which sits above `resolve`).
@@ -35,27 +35,34 @@ pub const SUMO_EGO_ROUTE: &str = "dh_ego_route";
 pub enum TrafficMode {
     /// SUMO through libsumo, in lockstep with the world (the Python env drives it).
     Sumo,
-    /// The pure-Rust reactive model (IDM car-following on the lane graph).
-    Native,
+    /// The pure-Rust reactive model (IDM car-following on the lane graph); `native` is its old
+    /// name, accepted until the next release.
+    #[serde(alias = "native")]
+    Idm,
     /// No background traffic (the scenario's scripted actors only).
     #[default]
     None,
 }
 
 impl TrafficMode {
+    /// Old names still accepted (with a deprecation warning from the Python side) and the mode
+    /// each now means. Keep in step with the `serde(alias)` attributes above (tested).
+    pub const DEPRECATED_NAMES: [(&'static str, TrafficMode); 1] = [("native", TrafficMode::Idm)];
+
     pub fn as_str(self) -> &'static str {
         match self {
             TrafficMode::Sumo => "sumo",
-            TrafficMode::Native => "native",
+            TrafficMode::Idm => "idm",
             TrafficMode::None => "none",
         }
     }
+    /// The mode of a current name or of a deprecated one.
     pub fn parse(s: &str) -> Option<TrafficMode> {
         Some(match s {
             "sumo" => TrafficMode::Sumo,
-            "native" => TrafficMode::Native,
+            "idm" => TrafficMode::Idm,
             "none" => TrafficMode::None,
-            _ => return None,
+            _ => return Self::DEPRECATED_NAMES.iter().find(|(n, _)| *n == s).map(|(_, m)| *m),
         })
     }
 }
@@ -119,7 +126,7 @@ pub struct TrafficVehicleSpec {
     pub depart_pos_m: Option<f64>,
     #[serde(default)]
     pub depart_speed: Option<SpeedChoice>,
-    /// This vehicle's maximum speed, m/s (a derived vType; native: caps the desired speed).
+    /// This vehicle's maximum speed, m/s (a derived vType; idm: caps the desired speed).
     #[serde(default)]
     #[schemars(extend("exclusiveMinimum" = 0))]
     pub max_speed_mps: Option<f64>,
@@ -295,7 +302,7 @@ pub struct MirrorSpec {
 }
 
 /// The seeded generator of stream `stream` of episode seed `seed` (the one place RNGs are
-/// built: random trips use stream 0, the native traffic model `0x1D_0000`).
+/// built: random trips use stream 0, the `idm` traffic model `0x1D_0000`).
 pub fn seeded_rng(seed: u64, stream: u64) -> SplitMix {
     SplitMix::new(seed ^ stream)
 }
@@ -488,7 +495,7 @@ impl Rx<'_> {
     }
     /// Per-vehicle `max_speed_mps` / `speed_factor`: a vType derived from `base` (id
     /// `<base>@<vehicle or flow id>`, every attribute copied, `maxSpeed` / `speedFactor`
-    /// replaced) so that SUMO and the native model read the same values. Returns the type to
+    /// replaced) so that SUMO and the `idm` model read the same values. Returns the type to
     /// use and the exact speed factor for SUMO's vehicle attribute.
     fn speed_vtype(
         &self,
@@ -539,7 +546,7 @@ impl Rx<'_> {
     }
     /// `depart_lane`: a SUMO name, or the index of a lane of the first edge that is open to
     /// `vclass` and from which the route can be driven (SUMO refuses the whole route file
-    /// otherwise; the native model would drive on it regardless).
+    /// otherwise; the `idm` model would drive on it regardless).
     fn lane(
         &self,
         field: &str,

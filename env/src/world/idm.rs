@@ -1,5 +1,5 @@
-//! Native reactive background traffic (no SUMO): the `[traffic]` demand driven by the
-//! Intelligent Driver Model along the lane graph (see `docs/traffic.md`, "Native mode").
+//! The `idm` traffic mode: reactive background traffic without SUMO, the `[traffic]` demand
+//! driven by the Intelligent Driver Model along the lane graph (see `docs/traffic.md`, "IDM mode").
 //!
 //! Per tick (0.05 s), for each vehicle in key order:
 //! * the nearest obstacle on its path ahead: other traffic, the scenario's actors, the ego (any
@@ -160,7 +160,7 @@ struct FlowState {
     count: u32,
 }
 
-/// The native reactive traffic model.
+/// The `idm` reactive traffic model.
 #[derive(Debug)]
 pub struct IdmTraffic {
     map: Arc<Network>,
@@ -536,6 +536,6 @@ impl TrafficModel for IdmTraffic {
     }
 
     fn name(&self) -> &str {
-        "native"
+        "idm"
     }
 }

@@ -1,7 +1,7 @@
 //! The background-traffic seam of the world.
 //!
 //! A [`TrafficModel`] moves vehicles the scenario does not script: SUMO (driven from the Python
-//! env through libsumo) or the native reactive model ([`super::idm`]). Once per tick, after the
+//! env through libsumo) or the `idm` reactive model ([`super::idm`]). Once per tick, after the
 //! ego and the scripted actors moved, the world hands the model one [`TrafficInput`] (time, ego,
 //! scenario actors, light colours) and takes back one [`TrafficFrame`]: every traffic vehicle
 //! present this tick and any changed light states. [`World::apply_traffic`](super::World) turns
@@ -96,6 +96,6 @@ pub trait TrafficModel: Send + Sync + std::fmt::Debug {
     fn drives_lights(&self) -> bool {
         false
     }
-    /// Short name for messages ("sumo", "native").
+    /// Short name for messages ("sumo", "idm").
     fn name(&self) -> &str;
 }

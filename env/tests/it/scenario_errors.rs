@@ -105,7 +105,7 @@ fn resolution_errors_have_line_and_column() {
     }
     // Fields of `[traffic]` too.
     let (at, e) = located("traffic", |t| {
-        format!("{t}\n[traffic]\nmode = \"native\"\n\n[[traffic.flows]]\nfrom = \"W_in\"\nto = \"C_E\"\nvehs_per_hour = -5.0\n")
+        format!("{t}\n[traffic]\nmode = \"idm\"\n\n[[traffic.flows]]\nfrom = \"W_in\"\nto = \"C_E\"\nvehs_per_hour = -5.0\n")
     });
     assert_eq!(at, (52, 17), "{e}");
     assert!(e.contains("traffic.flows[0].vehs_per_hour"), "{e}");
@@ -375,8 +375,7 @@ fn depart_lane_must_exist_and_be_open_to_the_class() {
     );
     assert_ne!(t, t0);
     // The same for `[[traffic.vehicles]]`.
-    let veh =
-        "[traffic]\nmode = \"native\"\n\n[[traffic.vehicles]]\nid = \"v\"\nroute = [\"C2T\", \"T2E\"]\n\
+    let veh = "[traffic]\nmode = \"idm\"\n\n[[traffic.vehicles]]\nid = \"v\"\nroute = [\"C2T\", \"T2E\"]\n\
                depart_lane = 0\ndepart_pos_m = 100.0\n";
     let (p, tv) = town01_variant("dl_vehicle", veh);
     assert_located(
@@ -403,7 +402,7 @@ fn depart_lane_must_exist_and_be_open_to_the_class() {
 #[test]
 fn unreachable_flow_is_located_at_its_key() {
     let flow = |from: &str, via: &str, to: &str| {
-        format!("{}\n[traffic]\nmode = \"native\"\n\n[[traffic.flows]]\nfrom = \"{from}\"\n{via}to = \"{to}\"\nvehs_per_hour = 100.0\n", fixture_text())
+        format!("{}\n[traffic]\nmode = \"idm\"\n\n[[traffic.flows]]\nfrom = \"{from}\"\n{via}to = \"{to}\"\nvehs_per_hour = 100.0\n", fixture_text())
     };
     for (tag, text, at, field, value) in [
         ("to", flow("N_in", "", "C_N"), "to = \"C_N\"", "traffic.flows[0].to", "\"C_N\""),

@@ -415,7 +415,7 @@ fn light_override_errors_name_the_field() {
 
 const TRAFFIC_SPEEDS: &str = r#"
 [traffic]
-mode = "native"
+mode = "idm"
 
 [[traffic.vehicles]]
 id = "slow"
@@ -438,7 +438,7 @@ speed_factor = 0.5
 "#;
 
 #[test]
-fn per_vehicle_speeds_reach_sumo_routes_and_the_native_model() {
+fn per_vehicle_speeds_reach_sumo_routes_and_the_idm_model() {
     let s = load("speeds", 0.0, TRAFFIC_SPEEDS);
     let xml = s.traffic.sumo_routes_xml(&s.map, 0, &s.ego, &[]);
     assert!(xml.contains("<vType id=\"car@slow\"") && xml.contains("maxSpeed=\"6\""), "{xml}");
@@ -516,18 +516,18 @@ fn unknown_keys_in_the_new_tables_are_named() {
     assert!(e.contains("actors[0].lane_changes[0].lane"), "{e}");
     let e = load_err(
         "uk_speed",
-        "[traffic]\nmode = \"native\"\n[[traffic.vehicles]]\nroute = [\"C2T\"]\nmax_speed = 5.0\n",
+        "[traffic]\nmode = \"idm\"\n[[traffic.vehicles]]\nroute = [\"C2T\"]\nmax_speed = 5.0\n",
     );
     assert!(e.contains("traffic.vehicles[0].max_speed"), "{e}");
 }
 
 #[test]
-fn native_traffic_obeys_the_overridden_light() {
+fn idm_traffic_obeys_the_overridden_light() {
     // A car approaching C from the west: the map's program is green for it, the override
     // (north–south green first) red for 45 s.
     let body = r#"
 [traffic]
-mode = "native"
+mode = "idm"
 
 [[traffic.vehicles]]
 route = ["W2C", "C2T"]
@@ -545,9 +545,9 @@ depart_speed = 10.0
         assert_eq!(v.len(), 1);
         (v[0].pose.pos.x, v[0].speed_mps)
     };
-    let (x, _) = x_after(&load("native_green", 0.0, body), 20);
+    let (x, _) = x_after(&load("idm_green", 0.0, body), 20);
     assert!(x > 0.0, "passes C on the map's green: x = {x}");
-    let red = load("native_red", 0.0, &format!("{body}\n[[lights]]\ntls = \"C\"\nstart_phase = 3\n"));
+    let red = load("idm_red", 0.0, &format!("{body}\n[[lights]]\ntls = \"C\"\nstart_phase = 3\n"));
     let (x, v) = x_after(&red, 30);
     assert!(x < -10.4 && x > -25.0 && v < 0.1, "waits at the stop line (x = −10.4): x = {x}, v = {v}");
 }

@@ -396,7 +396,7 @@ fn variation_errors_name_the_key() {
 
 #[test]
 fn traffic_departures_vary_by_seed_only_off_seed_zero() {
-    let body = "\n[traffic]\nmode = \"native\"\n\n[[traffic.vehicles]]\nroute = [\"C2T\"]\ndepart_s = 2.0\nspeed_factor = 0.9\n\n[[traffic.flows]]\nfrom = \"C2T\"\nto = \"C2T\"\nvehs_per_hour = 600\n";
+    let body = "\n[traffic]\nmode = \"idm\"\n\n[[traffic.vehicles]]\nroute = [\"C2T\"]\ndepart_s = 2.0\nspeed_factor = 0.9\n\n[[traffic.flows]]\nfrom = \"C2T\"\nto = \"C2T\"\nvehs_per_hour = 600\n";
     let s = load("var_traffic", 6.0, body);
     let d0 = s.traffic.varied(0);
     assert_eq!(d0, s.traffic);

@@ -141,9 +141,9 @@ fn scenarios_without_a_traffic_table_have_no_demand() {
     assert!(s.traffic.is_empty());
 }
 
-/// A town01 scenario in native traffic mode: `ego` is the `[ego]` table body, `rest` is
+/// A town01 scenario in idm traffic mode: `ego` is the `[ego]` table body, `rest` is
 /// appended (actors, traffic).
-fn native_town01(tag: &str, ego: &str, rest: &str) -> dh_env::scenario::ResolvedScenario {
+fn idm_town01(tag: &str, ego: &str, rest: &str) -> dh_env::scenario::ResolvedScenario {
     let map = scenarios().join("maps/town01/town01.net.xml");
     let text = format!(
         "version = 1\nid = \"{tag}\"\nname = \"t\"\ncategory = \"06_traffic_flow\"\ndescription = \"d\"\n\
@@ -159,7 +159,7 @@ fn native_town01(tag: &str, ego: &str, rest: &str) -> dh_env::scenario::Resolved
 
 /// Runs `secs` with the ego holding `v` m/s straight on; returns every contact (time, id) and
 /// the number of traffic vehicles seen.
-fn run_native(s: &dh_env::scenario::ResolvedScenario, v: f64, secs: f64) -> (Vec<(f64, u32)>, usize) {
+fn run_idm(s: &dh_env::scenario::ResolvedScenario, v: f64, secs: f64) -> (Vec<(f64, u32)>, usize) {
     let mut w = World::new(s, 0).unwrap();
     w.attach_traffic(Box::new(dh_env::world::idm::IdmTraffic::new(s).unwrap())).unwrap();
     let mut contacts = Vec::new();
@@ -175,30 +175,30 @@ fn run_native(s: &dh_env::scenario::ResolvedScenario, v: f64, secs: f64) -> (Vec
     (contacts, seen.len())
 }
 
-/// Native insertion waits, as SUMO's does, until the departure spot is free: a flow in the
+/// IDM insertion waits, as SUMO's does, until the departure spot is free: a flow in the
 /// ego's own lane never places (or, after the warm-up, queues) a car into the ego or into a
 /// scripted actor standing on its departure spot.
 #[test]
-fn native_insertion_never_overlaps_the_ego_or_an_actor() {
+fn idm_insertion_never_overlaps_the_ego_or_an_actor() {
     let flow =
-        "[traffic]\nmode = \"native\"\nwarmup_s = 3.0\n\n[[traffic.flows]]\nid = \"mine\"\nfrom = \"C2T\"\n\
+        "[traffic]\nmode = \"idm\"\nwarmup_s = 3.0\n\n[[traffic.flows]]\nid = \"mine\"\nfrom = \"C2T\"\n\
                 to = \"T2E\"\ndepart_lane = 1\nvehs_per_hour = 1800\nbegin_s = -3.0\n";
     // The ego 30 m into the lane, driving off at 8 m/s at t = 0 (it stands during the warm-up).
-    let s = native_town01(
+    let s = idm_town01(
         "own_lane",
         "start = { lane = \"C2T_1\", s = 30.0 }\nspeed_mps = 8.0\nroute_edges = [\"C2T\", \"T2E\"]",
         flow,
     );
-    let (contacts, n) = run_native(&s, 8.0, 20.0);
+    let (contacts, n) = run_idm(&s, 8.0, 20.0);
     assert!(contacts.is_empty(), "{contacts:?}");
     assert!(n >= 5, "the flow inserts once there is room: {n} vehicles");
     // The ego standing right on the departure spot: nothing departs until it has left.
-    let s = native_town01(
+    let s = idm_town01(
         "on_spot",
         "start = { lane = \"C2T_1\", s = 3.0 }\nroute_edges = [\"C2T\", \"T2E\"]",
         flow,
     );
-    let (contacts, n) = run_native(&s, 6.0, 20.0);
+    let (contacts, n) = run_idm(&s, 6.0, 20.0);
     assert!(contacts.is_empty(), "{contacts:?}");
     assert!(n >= 3, "{n}");
     // A scripted car parked on the departure spot (never triggered): the flow waits behind it
@@ -207,7 +207,7 @@ fn native_insertion_never_overlaps_the_ego_or_an_actor() {
         "[[actors]]\nkind = \"car\"\nroute = {{ lanes = [\"C2T_1\"], start_s = 4.0 }}\nspeed_mps = 5.0\n\
          start = {{ time_s = 1000.0 }}\n{flow}"
     );
-    let s = native_town01(
+    let s = idm_town01(
         "actor_spot",
         "start = { lane = \"C2T_1\", s = 60.0 }\nroute_edges = [\"C2T\", \"T2E\"]",
         &parked,
@@ -225,5 +225,32 @@ fn native_insertion_never_overlaps_the_ego_or_an_actor() {
                 t.id
             );
         }
+    }
+}
+
+/// Every `TrafficMode` that serde reads (its JSON Schema) round-trips through `parse` and
+/// `as_str`, and each deprecated name still reads as the mode it now means.
+#[test]
+fn traffic_mode_names_round_trip_and_old_names_still_read() {
+    let schema = schemars::schema_for!(TrafficMode).to_value();
+    let one_of = schema.get("oneOf").and_then(|a| a.as_array()).cloned().unwrap_or_default();
+    let names: Vec<String> = std::iter::once(&schema)
+        .chain(&one_of)
+        .flat_map(|a| {
+            let consts = a.get("const").into_iter();
+            consts.chain(a.get("enum").and_then(|e| e.as_array()).into_iter().flatten())
+        })
+        .filter_map(|v| v.as_str().map(str::to_owned))
+        .collect();
+    assert_eq!(names, ["sumo", "idm", "none"]);
+    for n in &names {
+        let m = TrafficMode::parse(n).unwrap();
+        assert_eq!(m.as_str(), n);
+        assert_eq!(serde_json::from_value::<TrafficMode>(serde_json::json!(n)).unwrap(), m);
+    }
+    for (old, new) in TrafficMode::DEPRECATED_NAMES {
+        assert!(!names.iter().any(|n| n == old), "{old} is still a current name");
+        assert_eq!(TrafficMode::parse(old), Some(new));
+        assert_eq!(serde_json::from_value::<TrafficMode>(serde_json::json!(old)).unwrap(), new);
     }
 }

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from drivehierarchy._core import ConfigError
+from drivehierarchy.envs.traffic.modes import TRAFFIC_MODES, traffic_mode_arg
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -60,7 +61,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     tr.add_argument("--max-speed", type=float, default=16.0, help="target speed at a[1] = +1 (m/s)")
     tr.add_argument(
         "--traffic",
-        choices=["sumo", "native", "none"],
+        type=traffic_mode_arg,
+        metavar="{" + ",".join(TRAFFIC_MODES) + "}",
         help="background traffic while training (default: each scenario's own mode)",
     )
     tr.add_argument(

@@ -65,7 +65,7 @@ class WrapperConfig:
     bev_size: int = 128
     reward: Literal["score", "shaped"] = "shaped"
     shaping: RewardConfig = field(default_factory=RewardConfig)
-    # Background traffic of the training envs ("sumo", "native", "none"; None = each scenario's).
+    # Background traffic of the training envs ("sumo", "idm", "none"; None = each scenario's).
     traffic: str | None = None
 
     def __post_init__(self) -> None:
@@ -79,8 +79,10 @@ class WrapperConfig:
             raise ConfigError(f"config `max_speed_mps` = {self.max_speed_mps!r}: expected in (0, 30]")
         if not 16 <= int(self.bev_size) <= 800:
             raise ConfigError(f"config `bev_size` = {self.bev_size!r}: expected 16..800 pixels")
-        if self.traffic not in (None, "sumo", "native", "none"):
-            raise ConfigError(f"config `traffic` = {self.traffic!r}: expected 'sumo', 'native' or 'none'")
+        if self.traffic is not None:
+            from drivehierarchy.envs.traffic.modes import canonical_traffic_mode
+
+            object.__setattr__(self, "traffic", canonical_traffic_mode(self.traffic, stacklevel=3))
 
     @property
     def uses_images(self) -> bool:
@@ -403,7 +405,7 @@ def terminal_penalty(w: RewardConfig, reason: str | None) -> float:
         return 0.0
     if reason.startswith("collision"):
         return w.collision
-    if reason == "offroad_timeout" or reason == "route_deviation":
+    if reason == "offroad_timeout":  # a route deviation ends as offroad_timeout too
         return w.offroad
     if reason == "blocked_timeout":
         return w.blocked

@@ -181,8 +181,7 @@ class Editor:
         try:
             geo = json.loads(_core.scenario_geometry(str(self.abs_path(rel)), text, sumo_home()))
         except DriveHierarchyError as exc:
-            msg = str(exc).replace(str(self.root) + os.sep, "")
-            return {"ok": False, "error": files.parse_error(msg)}
+            return {"ok": False, "error": files.error_fields(exc, self.root)}
         geo["summary"]["file"] = rel
         return {"ok": True, "geometry": geo}
 
@@ -425,6 +424,11 @@ def create_app(
             return f"{category}/{new_id}.toml"
         return f"{new_id}.toml"
 
+    def facts(request: Request, body: bytes) -> Response:
+        """The Rust facts the page builds its forms from (it keeps no copy of them)."""
+        schema = json.loads(_core.scenario_json_schema())
+        return JSONResponse({"constants": _core.constants(), "schema": schema})
+
     def read(request: Request, body: bytes) -> Response:
         rel = request.query_params.get("path", "")
         p = files.confine(ed.root, rel, must_exist=True)
@@ -567,6 +571,7 @@ def create_app(
     routes = [
         Route("/", api(index)),
         Route("/api/info", api(info)),
+        Route("/api/facts", api(facts)),
         Route("/api/file", api(read)),
         Route("/api/map", api(map_geometry)),
         Route("/api/snap", api(snap), methods=["POST"]),

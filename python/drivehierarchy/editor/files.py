@@ -14,6 +14,8 @@ from typing import Any
 import tomlkit
 from tomlkit.items import AoT, Array, InlineTable, Table
 
+from drivehierarchy._core import DriveHierarchyError
+
 MAX_FILE_BYTES = 1_000_000
 
 
@@ -236,29 +238,23 @@ def apply_edits(text: str, edits: list[dict[str, Any]]) -> str:
     return out.rstrip("\r\n") + text[len(text.rstrip("\r\n")) :]
 
 
-ERROR_RE = re.compile(
-    r"^(?P<file>.*?):(?P<line>\d+):(?P<column>\d+): "
-    r"field `(?P<field>[^`]*)` = (?P<value>.*?): (?P<message>.*)$",
-    re.S,
-)
-ERROR_NOLOC_RE = re.compile(
-    r"^(?P<file>.*?): field `(?P<field>[^`]*)` = (?P<value>.*?): (?P<message>.*)$", re.S
-)
+def error_fields(exc: DriveHierarchyError, root: Path | None = None) -> dict[str, Any]:
+    """What the page shows of a validator error: the message (paths under `root` made relative)
+    and the `file`, `line`, `column`, `field`, `value` and `reason` the core error carries
+    (None where it does not know them)."""
 
+    def rel(text: str) -> str:
+        return text.replace(str(root) + os.sep, "") if root is not None else text
 
-def parse_error(message: str) -> dict[str, Any]:
-    """The validator's `file:line:column: field `F` = V: message` split into its parts."""
-    m = ERROR_RE.match(message) or ERROR_NOLOC_RE.match(message)
-    if not m:
-        return {"message": message, "field": None}
-    d = m.groupdict()
+    file = getattr(exc, "file", None)
     return {
-        "message": message,
-        "field": d["field"],
-        "value": d["value"],
-        "reason": d["message"],
-        "line": int(d["line"]) if d.get("line") else None,
-        "column": int(d["column"]) if d.get("column") else None,
+        "message": rel(str(exc)),
+        "file": rel(file) if file is not None else None,
+        "line": getattr(exc, "line", None),
+        "column": getattr(exc, "column", None),
+        "field": getattr(exc, "field", None),
+        "value": getattr(exc, "value", None),
+        "reason": getattr(exc, "reason", None),
     }
 
 

@@ -70,24 +70,22 @@ class R4Config:
     front: CameraConfig | None = field(default_factory=CameraConfig)
     bev: BevConfig | None = field(default_factory=BevConfig)
     prompt: bool = _rust_default("prompt")
-    # Background traffic: "sumo" | "native" | "none"; None = the scenario's `[traffic]` mode.
+    # Background traffic: "sumo" | "idm" | "none"; None = the scenario's `[traffic]` mode.
     traffic: str | None = None
-    # SUMO mode's transport: "native" (libsumo's C++ API through the shim, no Python per tick),
-    # "python" (the libsumo module), "traci" (SUMO as a subprocess), "auto" = native for the
-    # process's first SUMO env, TraCI for further ones, python without the shims (docs/traffic.md).
+    # SUMO mode's transport: "libsumo" (libsumo's C++ API through the shim, no Python per tick),
+    # "libsumo-python" (the libsumo module), "traci" (SUMO as a subprocess), "auto" = libsumo for
+    # the process's first SUMO env, TraCI for further ones, libsumo-python without the shims
+    # (docs/traffic.md).
     sumo_backend: str = "auto"
 
     def __post_init__(self) -> None:
-        if self.sumo_backend not in ("auto", "native", "python", "traci"):
-            raise ConfigError(
-                f"config `sumo_backend` = {self.sumo_backend!r}: "
-                "expected 'auto', 'native', 'python' or 'traci'"
-            )
-        if self.traffic not in (None, "sumo", "native", "none"):
-            raise ConfigError(
-                f"config `traffic` = {self.traffic!r}: expected 'sumo', 'native', 'none' or None "
-                "(the scenario's mode)"
-            )
+        from drivehierarchy.envs.traffic.modes import canonical_traffic_mode
+        from drivehierarchy.envs.traffic.transport import canonical_sumo_backend
+
+        # Old names (traffic "native", sumo_backend "native"/"python") warn and are stored new.
+        object.__setattr__(self, "sumo_backend", canonical_sumo_backend(self.sumo_backend, stacklevel=3))
+        if self.traffic is not None:
+            object.__setattr__(self, "traffic", canonical_traffic_mode(self.traffic, stacklevel=3))
         if self.action_mode not in ("decision", "raw"):
             raise ConfigError(f"config `action_mode` = {self.action_mode!r}: expected 'decision' or 'raw'")
         if not isinstance(self.decision_interval_ticks, int) or self.decision_interval_ticks < 1:

@@ -28,8 +28,8 @@ from drivehierarchy import _core
 from drivehierarchy._core import ConfigError, SimulationError
 from drivehierarchy._heap import release_free_heap
 from drivehierarchy.envs.config import R4Config
-from drivehierarchy.envs.traffic import resolve_traffic_mode
-from drivehierarchy.envs.traffic.native import make_sumo_traffic, needs_new_session
+from drivehierarchy.envs.traffic.modes import resolve_traffic_mode, warn_deprecated_scenario_mode
+from drivehierarchy.envs.traffic.transport import make_sumo_traffic, needs_new_session
 from drivehierarchy.scenarios import resolve_scenario, sumo_home
 
 STATE_FIELDS: tuple[str, ...] = tuple(_core.STATE_FIELDS)
@@ -65,7 +65,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
     **Arguments**: `scenario` (a suite id such as `"07_sudden_brake/town01_07_lead_brakes"`,
     or a path to a scenario file), `config` (an `R4Config` or a dict of its fields),
     `render_mode="rgb_array"` (`render()` returns the front camera, read-only), and any
-    `R4Config` field as a keyword (`front=None`, `traffic="native"`, `action_mode="raw"`, …).
+    `R4Config` field as a keyword (`front=None`, `traffic="idm"`, `action_mode="raw"`, …).
     `reset(options={"scenario": ...})` switches the scenario.
 
     **Episode end**: `terminated` is True on any of the protocol's terminations — destination
@@ -142,6 +142,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         self._live = False
         text, self._scenario_text = self._scenario_text, None  # only for the first scenario
         self._sim = _core.Sim(path, self.config.to_json(), sumo_home(), text)
+        warn_deprecated_scenario_mode(path, text)
         self._scenario_path = path
         self._configure_traffic()
 
@@ -282,7 +283,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
     # -- background traffic (envs/traffic) -----------------------------------------------------
     @property
     def traffic_mode(self) -> str:
-        """The background-traffic mode in effect: "sumo", "native" or "none"."""
+        """The background-traffic mode in effect: "sumo", "idm" or "none"."""
         return resolve_traffic_mode(self.config.traffic, self._sim.scenario_traffic_mode)
 
     def _configure_traffic(self) -> None:

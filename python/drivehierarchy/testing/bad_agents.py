@@ -302,7 +302,7 @@ def drive(env: Any, agent: Any, seed: int) -> dict[str, Any]:
 
 
 def fuzz_episode(
-    scenario: str, kind: str, seed: int = 0, backend: str = "native", images: bool = False
+    scenario: str, kind: str, seed: int = 0, backend: str = "libsumo", images: bool = False
 ) -> dict[str, Any]:
     """One episode of a bad driver; runs in a worker process. Never raises: an exception is
     returned as `error` (with its traceback) so one run reports every failing episode."""

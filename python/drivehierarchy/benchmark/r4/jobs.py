@@ -101,7 +101,7 @@ def suite_scenarios(suite: str) -> list[Path]:
 
 
 def traffic_mode(scenario: Path, config: R4Config) -> str:
-    """The background traffic ("sumo", "native", "none") the env runs the scenario with: the
+    """The background traffic ("sumo", "idm", "none") the env runs the scenario with: the
     config's `traffic` override, else the scenario's `[traffic]` as the Rust loader resolves it
     (a table without `mode` is SUMO). Loads the scenario, so a bad file is a `ScenarioError` here."""
     from drivehierarchy.envs.traffic import resolve_traffic_mode  # imports libsumo on use

@@ -15,6 +15,7 @@ import re
 from pathlib import Path
 from typing import Any
 
+from drivehierarchy import _core
 from drivehierarchy._core import ConfigError
 
 _PREFIX = re.compile(r"^(\d+)_")
@@ -121,10 +122,7 @@ def paper_runs(models: list[str]) -> list[tuple[str, dict[str, Any]]]:
     """The paper's Table 2 rows of the models that match a preset (for side-by-side tables)."""
     from drivehierarchy.agents.vlm.presets import resolve_model
 
-    cats = [
-        "01_pedestrian", "02_obstacles", "03_turning", "04_intersection", "05_t_intersection",
-        "06_traffic_flow", "07_sudden_brake", "08_merging", "09_yielding", "10_roundabout",
-    ]  # fmt: skip
+    cats = _core.constants()["categories"]
     out = []
     for m in models:
         _, preset = resolve_model(m)
@@ -134,7 +132,7 @@ def paper_runs(models: list[str]) -> list[tuple[str, dict[str, Any]]]:
         out.append(
             (
                 f"{preset.paper_name} (paper)",
-                {"categories": dict(zip(cats, vals[:10], strict=True)), "r4_score": vals[10]},
+                {"categories": dict(zip(cats, vals[: len(cats)], strict=True)), "r4_score": vals[len(cats)]},
             )
         )
     return out

@@ -232,7 +232,7 @@ async def drive_vlm_scene(
                 await remote("close")
 
 
-TICK_S = 0.05  # the protocol's simulation step
+TICK_S: float = _core.constants()["tick_s"]  # the protocol's simulation step
 
 
 def _step_latency_aware(

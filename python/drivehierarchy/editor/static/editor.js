@@ -12,6 +12,10 @@ const S = {
   errors: [], warnings: [], episode: null, undo: [], redo: [],
 };
 window.editor = { S };
+// The simulator's facts (scenario enums, kind → SUMO class, actor keys: `_core.constants()`)
+// and the scenario JSON Schema, fetched from /api/facts at load: the page keeps no copy of them.
+let FACTS = null;
+const K = () => FACTS.constants;
 
 // -- server ----------------------------------------------------------------------------------
 function busy(delta) {
@@ -478,12 +482,14 @@ function setMode(mode) {
 }
 
 function vclassFor(kind) {
-  if (kind === "pedestrian") return "pedestrian";
-  if (kind === "cyclist") return "bicycle";
-  if (kind === "bus") return "bus";
-  if (kind === "truck") return "truck";
-  if (kind === "motorcycle") return "motorcycle";
-  return "passenger";
+  return K().vclass_of[kind] ?? null;
+}
+
+// The tool bar's kind pickers: moving kinds for actors, every kind for obstacles (moving ones standing still).
+function fillKindPickers() {
+  const opts = (kinds, label) => kinds.map((k) => h("option", { value: k }, label(k)));
+  $("actor-kind").replaceChildren(...opts(K().actor_kinds, (k) => k));
+  $("obstacle-kind").replaceChildren(...opts(K().obstacle_kinds, (k) => (K().actor_kinds.includes(k) ? `${k} (static)` : k)));
 }
 
 async function snap(x, y, vclass, internal) {
@@ -924,13 +930,14 @@ function placeField(label, path, opts) {
   return h("div", { class: "place" }, head, cells);
 }
 
-const TRIGGERS = ["time_s", "ego_within_m", "ego_eta_s", "after"];
-const BRAKES = ["", "at_s", "after_s", "ego_within_m", "ego_gap_m", "ego_gap_s", "ego_ttc_s", "ego_eta_s", "gap_held_s", "after"];
+// The keys that pick a start trigger's / a brake's form (from the simulator, see FACTS).
+const TRIGGERS = () => K().start_triggers;
+const BRAKES = () => ["", ...K().brake_triggers];
 const BRAKE_KEYS = ["decel_mps2", "to_speed_mps", "hold_s"];
 
 function triggerKind(t) {
   if (!t) return "time_s";
-  return TRIGGERS.find((k) => k in t) || "time_s";
+  return TRIGGERS().find((k) => k in t) || "time_s";
 }
 
 function defaultPlace() {
@@ -954,7 +961,7 @@ function triggerPoint(i) {
 function triggerFields(i, prefix, t, choices) {
   const isBrake = prefix[prefix.length - 1] === "brake";
   const box = h("div", { class: "trigger" });
-  const kind = isBrake ? (BRAKES.find((k) => k && t && k in t) || "") : triggerKind(t);
+  const kind = isBrake ? (BRAKES().find((k) => k && t && k in t) || "") : triggerKind(t);
   const sel = h("select", {}, ...choices.map((c) => h("option", { value: c }, c || "(none)")));
   sel.value = kind;
   sel.dataset.path = prefix.join(".") + ".kind";
@@ -979,7 +986,7 @@ function triggerFields(i, prefix, t, choices) {
   if (kind === "after") {
     const names = actorNames(i);
     cells.append(cell("after (actor)", [...prefix, "after"], names.length ? names : "text"),
-      cell("delay_s", [...prefix, "delay_s"], "number"), cell("event", [...prefix, "event"], ["", "start", "brake", "end"]));
+      cell("delay_s", [...prefix, "delay_s"], "number"), cell("event", [...prefix, "event"], ["", ...K().chain_events]));
   } else {
     cells.append(cell(kind, [...prefix, kind], "number"));
   }
@@ -988,7 +995,7 @@ function triggerFields(i, prefix, t, choices) {
   if (["ego_within_m", "ego_eta_s"].includes(kind)) {
     box.append(placeField("of", [...prefix, "of"], { pair: true, self: kind === "ego_within_m" || !isBrake, point: () => triggerPoint(i) }));
   }
-  const known = [...TRIGGERS, ...BRAKES.filter(Boolean), "of", "delay_s", "event", ...BRAKE_KEYS];
+  const known = [...TRIGGERS(), ...BRAKES().filter(Boolean), "of", "delay_s", "event", ...BRAKE_KEYS];
   if (isObj(t)) box.append(...extras(t, known, prefix));
   return box;
 }
@@ -1026,21 +1033,18 @@ function routeFields(p, route, vclass) {
   return box;
 }
 
-const ACTOR_KEYS = ["name", "kind", "speed_mps", "accel_mps2", "initial_speed_mps", "at_end", "waypoints", "route", "start", "brake",
-  "pace", "lane_changes", "behavior", "at", "length_m", "width_m", "height_m", "color"];
-
 function actorForm(a, i) {
   const fs = h("fieldset", { "data-actor": i, class: S.selected === i ? "selected" : "" },
     h("legend", {}, `actors[${i}] ${a.name || ""}`));
   const p = ["actors", i];
   const vclass = vclassFor(a.kind);
   fs.append(field("name", [...p, "name"], "text"),
-    field("kind", [...p, "kind"], ["car", "bus", "truck", "motorcycle", "cyclist", "pedestrian"]),
+    field("kind", [...p, "kind"], K().actor_kinds),
     h("div", { class: "cells" }, cell("speed_mps", [...p, "speed_mps"], "number"), cell("accel_mps2", [...p, "accel_mps2"], "number"),
-      cell("initial_speed_mps", [...p, "initial_speed_mps"], "number"), cell("at_end", [...p, "at_end"], ["", "stop", "remove"]),
+      cell("initial_speed_mps", [...p, "initial_speed_mps"], "number"), cell("at_end", [...p, "at_end"], ["", ...K().at_end]),
       cell("length_m", [...p, "length_m"], "number"), cell("width_m", [...p, "width_m"], "number"), cell("height_m", [...p, "height_m"], "number"),
       colorField("color", [...p, "color"])));
-  if ("behavior" in a) fs.append(field("behavior", [...p, "behavior"], ["scripted", "external"]));
+  if ("behavior" in a) fs.append(field("behavior", [...p, "behavior"], K().behaviors));
   if ("at" in a) fs.append(placeField("at", [...p, "at"], { vclass }));
   if ("waypoints" in a) {
     fs.append(rows("waypoints", [...p, "waypoints"], (wp) => [placeField("", wp, { vclass, more: ["speed_mps"] })],
@@ -1050,15 +1054,15 @@ function actorForm(a, i) {
       }, { inline: true, floats: true, addLabel: "+ waypoint" }));
   }
   if ("route" in a) fs.append(routeFields([...p, "route"], a.route, vclass));
-  fs.append(triggerFields(i, [...p, "start"], a.start, TRIGGERS));
-  fs.append(triggerFields(i, [...p, "brake"], a.brake, BRAKES));
+  fs.append(triggerFields(i, [...p, "start"], a.start, TRIGGERS()));
+  fs.append(triggerFields(i, [...p, "brake"], a.brake, BRAKES()));
   fs.append(paceFields([...p, "pace"], a.pace));
   if ("route" in a || "lane_changes" in a) {
     fs.append(rows("lane_changes", [...p, "lane_changes"], (lc) => [cell("at_s", [...lc, "at_s"], "number"),
       cell("to_lane", [...lc, "to_lane"], "lane", { vclass }), cell("length_m", [...lc, "length_m"], "number")],
     () => ({ at_s: 20.0, to_lane: "", length_m: 20.0 }), { inline: true, floats: true, addLabel: "+ lane change" }));
   }
-  fs.append(...extras(a, ACTOR_KEYS, p));
+  fs.append(...extras(a, K().actor_keys, p));
   fs.append(h("button", { type: "button", onclick: () => safeEdit([{ path: ["actors", i], delete: true }]) }, "Delete actor"));
   return fs;
 }
@@ -1090,7 +1094,7 @@ function renderForm() {
   (S.doc.obstacles || []).forEach((o, i) => {
     const fs = h("fieldset", {}, h("legend", {}, `obstacles[${i}] ${o.name || ""}`));
     const p = ["obstacles", i];
-    fs.append(field("kind", [...p, "kind"], ["cone", "barrier", "static_object", "car", "bus", "truck", "motorcycle", "cyclist", "pedestrian"]),
+    fs.append(field("kind", [...p, "kind"], K().obstacle_kinds),
       placeField("at", [...p, "at"], { vclass: null }), field("name", [...p, "name"], "text"),
       h("div", { class: "cells" }, cell("length_m", [...p, "length_m"], "number"), cell("width_m", [...p, "width_m"], "number"),
         cell("height_m", [...p, "height_m"], "number"), colorField("color", [...p, "color"])),
@@ -1099,9 +1103,9 @@ function renderForm() {
     form.append(fs);
   });
   const signs = h("fieldset", {}, h("legend", {}, "[[signs]]"));
-  signs.append(rows("signs", ["signs"], (p) => [cell("kind", [...p, "kind"], ["stop", "yield", "speed_limit"]),
+  signs.append(rows("signs", ["signs"], (p) => [cell("kind", [...p, "kind"], K().sign_kinds),
     placeField("at", [...p, "at"], {}), ...extras(get(S.doc, p), ["kind", "at"], p, true)],
-  () => ({ kind: "stop", at: defaultPlace() === "actor_self" ? { x: 0.0, y: 0.0 } : defaultPlace() }), { floats: true, addLabel: "+ sign" }));
+  () => ({ kind: K().sign_kinds[0], at: defaultPlace() === "actor_self" ? { x: 0.0, y: 0.0 } : defaultPlace() }), { floats: true, addLabel: "+ sign" }));
   form.append(signs);
   renderLights();
 }
@@ -1211,9 +1215,9 @@ function trafficForm() {
   const tr = h("fieldset", { id: "traffic" }, h("legend", {}, "[traffic]"));
   const t = S.doc.traffic;
   tr.append(h("datalist", { id: "vtypes" }, ...VTYPES.map((v) => h("option", { value: v }))),
-    h("datalist", { id: "depart-lanes" }, ...["best", "random", "free", "first"].map((v) => h("option", { value: v }))),
-    h("datalist", { id: "depart-speeds" }, ...["max", "desired", "random"].map((v) => h("option", { value: v }))));
-  tr.append(field("mode", ["traffic", "mode"], ["", "sumo", "native", "none"]), field("warmup_s", ["traffic", "warmup_s"], "number"),
+    h("datalist", { id: "depart-lanes" }, ...K().depart_lanes.map((v) => h("option", { value: v }))),
+    h("datalist", { id: "depart-speeds" }, ...K().depart_speeds.map((v) => h("option", { value: v }))));
+  tr.append(field("mode", ["traffic", "mode"], ["", ...K().traffic_modes]), field("warmup_s", ["traffic", "warmup_s"], "number"),
     field("vtypes", ["traffic", "vtypes"], "text", { placeholder: "shipped vtypes.add.xml" }));
   const pv = ["traffic", "vehicles"];
   tr.append(rows("vehicles", pv, (p) => [cell("id", [...p, "id"], "text"), cell("vtype", [...p, "vtype"], "text", { list: "vtypes" }),
@@ -1624,6 +1628,8 @@ window.addEventListener("hashchange", guard(async () => {
   busy(0);
   updateUndo();
   try {
+    FACTS = await api("/api/facts");
+    fillKindPickers();
     await refreshFiles();
     setMode("select");
     const want = decodeURIComponent(location.hash.slice(1));

@@ -46,9 +46,9 @@ from typing import Any
 
 import numpy as np
 
-from drivehierarchy import ConfigError
+from drivehierarchy import ConfigError, _core
 
-DECISION_HZ = 4.0
+DECISION_HZ: float = _core.constants()["decision_hz"]  # the protocol's 4 Hz
 FRONT = "CAM_FRONT"
 SURROUND = (
     "CAM_FRONT",

@@ -1,15 +1,17 @@
-"""Native reactive background traffic (no SUMO): the same [traffic] demand driven by the Rust
-world's IDM model (docs/traffic.md, "Native mode"). Same behaviour checks as the SUMO tests."""
+"""The `idm` traffic mode, reactive background traffic without SUMO: the same [traffic] demand
+driven by the Rust world's IDM model (docs/traffic.md, "IDM mode"). Same behaviour checks as the
+SUMO tests."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
+import pytest
 from traffic_helpers import BENCH, frame, make_env, run_expert, traffic_rows, write_scenario
 
 
-def test_native_queues_behind_a_stopped_ego_and_never_passes_through(tmp_path: Path) -> None:
+def test_idm_queues_behind_a_stopped_ego_and_never_passes_through(tmp_path: Path) -> None:
     # One-lane road T2R: the ego stands 40 m in while SUMO runs 60 s of warm-up (the protocol
     # ends an episode after 5 s at rest, so the long wait happens in the warm-up, where SUMO
     # sees the ego standing at its start), then for 4.5 s of the episode with the brake held.
@@ -27,7 +29,7 @@ def test_native_queues_behind_a_stopped_ego_and_never_passes_through(tmp_path: P
         vehs_per_hour = 900
         """,
     )
-    env = make_env(p, action_mode="raw", traffic="native")
+    env = make_env(p, action_mode="raw", traffic="idm")
     try:
         env.reset(seed=3)
         queued_max = 0
@@ -52,9 +54,9 @@ def test_native_queues_behind_a_stopped_ego_and_never_passes_through(tmp_path: P
         env.close()
 
 
-def test_native_vehicles_stop_at_red(tmp_path: Path) -> None:
+def test_idm_vehicles_stop_at_red(tmp_path: Path) -> None:
     # Light C gives W2C/T2C green for the first 45 s of its cycle; N2C is red meanwhile
-    # (scenarios/maps/README.md). The native mode runs the map's programs.
+    # (scenarios/maps/README.md). The idm mode runs the map's programs.
     p = write_scenario(
         tmp_path,
         """
@@ -69,7 +71,7 @@ def test_native_vehicles_stop_at_red(tmp_path: Path) -> None:
         vehs_per_hour = 1200
         """,
     )
-    env = make_env(p, traffic="native")  # the expert drives east on green meanwhile
+    env = make_env(p, traffic="idm")  # the expert drives east on green meanwhile
     try:
         env.reset(seed=0)
         waited, crossed_on_green, head_colours = 0, 0, set()
@@ -95,8 +97,8 @@ def test_native_vehicles_stop_at_red(tmp_path: Path) -> None:
         env.close()
 
 
-def test_native_fifty_vehicles_expert_reaches_destination_without_collision() -> None:
-    out = run_expert(BENCH, seed=0, traffic="native")
+def test_idm_fifty_vehicles_expert_reaches_destination_without_collision() -> None:
+    out = run_expert(BENCH, seed=0, traffic="idm")
     counts = out["counts"]
     assert isinstance(counts, list) and counts[0] >= 50, counts[:3]
     info = out["info"]
@@ -105,14 +107,28 @@ def test_native_fifty_vehicles_expert_reaches_destination_without_collision() ->
     assert not [e for e in info["events"] if str(e["type"]).startswith("collision")], info["events"]
 
 
-def test_native_traffic_is_deterministic() -> None:
-    a = run_expert(BENCH, seed=5, steps=60, traffic="native")
-    b = run_expert(BENCH, seed=5, steps=60, traffic="native")
-    c = run_expert(BENCH, seed=6, steps=60, traffic="native")
+def test_idm_traffic_is_deterministic() -> None:
+    a = run_expert(BENCH, seed=5, steps=60, traffic="idm")
+    b = run_expert(BENCH, seed=5, steps=60, traffic="idm")
+    c = run_expert(BENCH, seed=6, steps=60, traffic="idm")
     assert a["traffic"] == b["traffic"] and a["trajectory"] == b["trajectory"]
     assert a["traffic"] != c["traffic"]
-    env = make_env(BENCH, traffic="native")
+    env = make_env(BENCH, traffic="idm")
     try:
-        assert env.traffic_mode == "native" and env.reset(seed=0) and env.sim.traffic == "native"
+        assert env.traffic_mode == "idm" and env.reset(seed=0) and env.sim.traffic == "idm"
+    finally:
+        env.close()
+
+
+def test_the_old_mode_name_still_runs_idm_with_a_deprecation_warning(tmp_path: Path) -> None:
+    p = write_scenario(
+        tmp_path,
+        '[ego]\nstart = { lane = "C2T_1", s = 20.0 }\nroute_edges = ["C2T"]\n\n'
+        '[traffic]\nmode = "native"\n[[traffic.vehicles]]\nroute = ["C2T"]\ndepart_s = 0.0\n',
+    )
+    with pytest.warns(DeprecationWarning, match=r"s\.toml: field `traffic\.mode` = 'native' .* use 'idm'"):
+        env = make_env(p)
+    try:
+        assert env.traffic_mode == "idm" and env.reset(seed=0) and env.sim.traffic == "idm"
     finally:
         env.close()
