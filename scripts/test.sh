@@ -104,7 +104,8 @@ if [ "$quick" = 1 ]; then
     fi
     export PATH="$PWD/.venv/bin:$PATH"
     step "cargo fmt"; cargo fmt --all -- --check
-    step "ruff";      $PY -m ruff check . && $PY -m ruff format --check .
+    step "ruff";      $PY -m ruff check .
+                      $PY -m ruff format --check .
     step "stubtest";  $PY -m mypy.stubtest drivehierarchy._core --allowlist python/stubtest-allowlist.txt
     step "pytest (quick)"
     $PY -m pytest tests -n 2 --dist loadfile -q --durations=10 "${QUICK_SKIP[@]}" "$@"
