@@ -15,11 +15,11 @@ pub mod variation_spec;
 pub use json_schema::{scenario_json_schema, scenario_json_schema_string};
 pub use parse::{parse_scenario_file, parse_scenario_str};
 pub use resolve::{
-    default_size, default_speed_mps, discover_sumo_home, offset_polyline, resolve_map_path,
-    set_builtin_maps_dir, vclass_of, ActorMotion, AtEnd, BrakeEvent, BrakeWhen, ChainEvent, LightProgram,
-    LoadOptions, MapCache, Pace, PaceMode, ResolvedActor, ResolvedEgo, ResolvedScenario, ScriptedPath,
-    Trigger, BUILTIN_PREFIX, DEFAULT_REFERENCE_SPEED_MPS, EGO_COLOR, ETA_MAX_OFFSET_M, ETA_MIN_SPEED_MPS,
-    PACE_GAIN_PER_S, PACE_SETTLED_M, PALETTE, SNAP_DISTANCE_M, SUMO_PREFIX,
+    default_size, default_speed_mps, offset_polyline, resolve_map_path, set_builtin_maps_dir, vclass_of,
+    ActorMotion, AtEnd, BrakeEvent, BrakeWhen, ChainEvent, LightProgram, LoadOptions, MapCache, Pace,
+    PaceMode, ResolvedActor, ResolvedEgo, ResolvedScenario, ScriptedPath, Trigger, BUILTIN_PREFIX,
+    DEFAULT_REFERENCE_SPEED_MPS, EGO_COLOR, ETA_MAX_OFFSET_M, ETA_MIN_SPEED_MPS, PACE_GAIN_PER_S,
+    PACE_SETTLED_M, PALETTE, SNAP_DISTANCE_M, SUMO_PREFIX,
 };
 pub use schema::{ScenarioFile, CATEGORIES, SCENARIO_VERSION};
 pub use traffic::seeded_rng;

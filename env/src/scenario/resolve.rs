@@ -5,6 +5,7 @@ use super::schema::*;
 pub use super::tables::{default_size, vclass_of};
 use crate::geom::{Polyline, Pose, Vec2};
 use crate::map::{EdgeFunction, EdgeIdx, LaneIdx, Network, VClass};
+use crate::sumo_home::SumoHome;
 use crate::vehicle_params::VehicleParams;
 use crate::view::{ActorKind, SignView};
 use crate::{Error, Result};
@@ -374,8 +375,7 @@ fn hold_s(p: &ScriptedPath) -> f64 {
 /// Where `sumo:` maps live and an optional cache of loaded networks.
 #[derive(Debug, Clone, Default)]
 pub struct LoadOptions {
-    /// `SUMO_HOME` for `sumo:` map paths; when `None` the `SUMO_HOME` environment variable is used
-    /// (the Python layer sets it from `sumo.SUMO_HOME`).
+    /// `SUMO_HOME` for `sumo:` map paths; when `None`, [`SumoHome::locate`] finds it.
     pub sumo_home: Option<PathBuf>,
     pub cache: Option<Arc<MapCache>>,
 }
@@ -401,21 +401,6 @@ impl MapCache {
         }
         Ok(net)
     }
-}
-
-/// `SUMO_HOME` from the environment, else the one the installed `eclipse-sumo` Python package
-/// reports (`python3 -c "import sumo; print(sumo.SUMO_HOME)"`); `None` when neither exists.
-pub fn discover_sumo_home() -> Option<PathBuf> {
-    if let Some(h) = std::env::var_os("SUMO_HOME") {
-        return Some(PathBuf::from(h));
-    }
-    let out = std::process::Command::new("python3")
-        .args(["-c", "import sumo; print(sumo.SUMO_HOME)"])
-        .output()
-        .ok()?;
-    let s = String::from_utf8(out.stdout).ok()?;
-    let p = PathBuf::from(s.trim());
-    (out.status.success() && p.is_dir()).then_some(p)
 }
 
 /// `builtin:NAME` maps: the folder holding the shipped maps (`NAME/NAME.net.xml`), registered
@@ -462,7 +447,7 @@ pub fn resolve_map_path(file: &Path, map: &str, sumo_home: Option<&Path>) -> Res
     if let Some(rest) = map.strip_prefix(SUMO_PREFIX) {
         let home = match sumo_home {
             Some(h) => h.to_path_buf(),
-            None => discover_sumo_home().ok_or_else(|| {
+            None => SumoHome::locate().map(|h| h.0).ok_or_else(|| {
                 Error::scenario(file, "map", map, "a `sumo:` map needs SUMO_HOME (set the SUMO_HOME environment variable, pass sumo_home, or `pip install eclipse-sumo`)")
             })?,
         };
