@@ -18,8 +18,7 @@ pub use resolve::{
     default_size, default_speed_mps, offset_polyline, resolve_map_path, set_builtin_maps_dir, vclass_of,
     ActorMotion, AtEnd, BrakeEvent, BrakeWhen, ChainEvent, LightProgram, LoadOptions, MapCache, Pace,
     PaceMode, ResolvedActor, ResolvedEgo, ResolvedScenario, ScriptedPath, Trigger, BUILTIN_PREFIX,
-    DEFAULT_REFERENCE_SPEED_MPS, EGO_COLOR, ETA_MAX_OFFSET_M, ETA_MIN_SPEED_MPS, PACE_GAIN_PER_S,
-    PACE_SETTLED_M, PALETTE, SNAP_DISTANCE_M, SUMO_PREFIX,
+    DEFAULT_REFERENCE_SPEED_MPS, EGO_COLOR, ETA_MAX_OFFSET_M, PALETTE, SNAP_DISTANCE_M, SUMO_PREFIX,
 };
 pub use schema::{ScenarioFile, CATEGORIES, SCENARIO_VERSION};
 pub use traffic::seeded_rng;

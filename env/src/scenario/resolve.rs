@@ -75,16 +75,13 @@ pub enum Trigger {
     /// Starts when the ego centre is within `radius_m` of `point`.
     EgoWithin { radius_m: f64, point: Vec2 },
     /// Starts when the ego is expected to reach `point` within `eta_s`: its distance along its
-    /// route to `route_s` (the point's projection) ÷ max(ego speed, [`ETA_MIN_SPEED_MPS`]) ≤
+    /// route to `route_s` (the point's projection) ÷ max(ego speed, [`crate::world::scripted::ETA_MIN_SPEED_MPS`]) ≤
     /// `eta_s`, while the point is still ahead.
     EgoEta { eta_s: f64, point: Vec2, route_s: f64 },
     /// Starts `delay_s` after `event` of the scenario actor with index `actor` (id = index + 1).
     After { actor: usize, event: ChainEvent, delay_s: f64 },
 }
 
-/// Floor of the ego speed in the time-to-conflict estimate, m/s (a standing ego is expected to
-/// move off at walking pace rather than never).
-pub const ETA_MIN_SPEED_MPS: f64 = 0.5;
 /// A time-to-conflict point must lie this close to the ego route, m.
 pub const ETA_MAX_OFFSET_M: f64 = 30.0;
 
@@ -167,11 +164,6 @@ pub enum PaceMode {
     /// route) `offset_s` after the ego's expected arrival there.
     Meet { point: Vec2, route_s: f64, actor_s: f64, offset_s: f64 },
 }
-
-/// Gain of the gap controller: speed = ego speed − gain × (gap − target gap), 1/s.
-pub const PACE_GAIN_PER_S: f64 = 0.5;
-/// A pace gap counts as settled within max(this, 15 % of the target) of its target, m.
-pub const PACE_SETTLED_M: f64 = 1.0;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BrakeEvent {
