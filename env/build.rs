@@ -5,8 +5,8 @@
 //! Python binding copies them into its package).
 //!
 //! SUMO's C++ headers and client libraries come from the `eclipse-sumo` wheel, found as
-//! `dh_env::sumo_home` finds it at run time: `$SUMO_HOME`, else the `sumo` package of the build's
-//! Python (`$PYO3_PYTHON`, else `python3`). Without them (or
+//! `dh_env::sumo_home` finds it at run time: the `sumo` package of the build's Python
+//! (`$PYO3_PYTHON`, else `python3`), else `$SUMO_HOME`. Without them (or
 //! without a C++ compiler) the build still succeeds, without the shims: SUMO mode then needs
 //! the Python `libsumo` transport. Nothing links SUMO.
 

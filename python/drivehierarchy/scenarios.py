@@ -50,8 +50,8 @@ def resolve_scenario(scenario: str | Path | None) -> str:
 
 @functools.cache
 def sumo_home() -> str | None:
-    """SUMO_HOME for `sumo:` map paths and for starting SUMO, if any: `$SUMO_HOME`, else the folder
-    of the installed `eclipse-sumo` package (`_core.sumo_home`, the one lookup of the workspace;
+    """SUMO_HOME for `sumo:` map paths and for starting SUMO, if any: the folder of the installed
+    `eclipse-sumo` package, else `$SUMO_HOME` (`_core.sumo_home`, the one lookup of the workspace;
     docs/traffic.md, "Where SUMO is found"). Fixed for the process after the first call.
     """
     return _core.sumo_home()
@@ -60,10 +60,10 @@ def sumo_home() -> str | None:
 def sumo_runtime_home() -> str:
     """`sumo_home()` for starting SUMO, with the environment `import sumo` would set up
     (`SUMO_HOME`, and `PROJ_LIB`/`PROJ_DATA` for its projection data) without paying for the
-    import; `ImportError` when there is neither `$SUMO_HOME` nor the eclipse-sumo package."""
+    import; `ImportError` when there is neither the eclipse-sumo package nor `$SUMO_HOME`."""
     home = sumo_home()
     if home is None:
-        raise ImportError("no SUMO_HOME and no module named 'sumo' (the eclipse-sumo package)")
+        raise ImportError("no module named 'sumo' (the eclipse-sumo package) and no SUMO_HOME")
     os.environ.setdefault("SUMO_HOME", home)
     if not os.environ.get("PROJ_LIB") and not os.environ.get("PROJ_DATA"):
         os.environ["PROJ_LIB"] = os.environ["PROJ_DATA"] = os.path.join(home, "data", "proj")

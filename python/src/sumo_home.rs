@@ -21,7 +21,7 @@ fn package_home(py: Python<'_>) -> PyResult<Option<PathBuf>> {
     Ok(origin.parent().map(PathBuf::from))
 }
 
-/// `$SUMO_HOME` if set and non-empty, else the folder of this interpreter's `sumo` package;
+/// The folder of this interpreter's `sumo` package, else `$SUMO_HOME` if set and non-empty;
 /// `None` when neither exists (docs/traffic.md, "Where SUMO is found").
 #[pyfunction]
 pub fn sumo_home(py: Python<'_>) -> PyResult<Option<OsString>> {

@@ -8,8 +8,8 @@
 const SUMO_PACKAGE_PROBE: &str = "import importlib.util as u, os; s = u.find_spec('sumo'); \
                                   print(os.path.dirname(s.origin) if s and s.origin else '')";
 
-/// Step 1: `$SUMO_HOME` when set and non-empty. An explicit setting is taken as is (a wrong one
-/// shows up as a "not found under SUMO_HOME (path)" error, not as a silent fallback).
+/// Step 2: `$SUMO_HOME` when set and non-empty, taken as is (a wrong one shows up as a "not
+/// found under SUMO_HOME (path)" error).
 fn sumo_home_from_env() -> Option<std::path::PathBuf> {
     std::env::var_os("SUMO_HOME").filter(|h| !h.is_empty()).map(std::path::PathBuf::from)
 }
@@ -20,7 +20,7 @@ fn sumo_home_python() -> String {
     std::env::var("PYO3_PYTHON").ok().filter(|p| !p.is_empty()).unwrap_or_else(|| "python3".into())
 }
 
-/// Step 2 outside Python: the `sumo` package's folder as `python` reports it; `None` when that
+/// Step 1 outside Python: the `sumo` package's folder as `python` reports it; `None` when that
 /// interpreter does not run or has no such package.
 fn sumo_home_from_python(python: &str) -> Option<std::path::PathBuf> {
     let out = std::process::Command::new(python).args(["-c", SUMO_PACKAGE_PROBE]).output().ok()?;
@@ -29,7 +29,10 @@ fn sumo_home_from_python(python: &str) -> Option<std::path::PathBuf> {
     (out.status.success() && home.is_dir()).then_some(home)
 }
 
-/// The precedence: `$SUMO_HOME`, else `package()` (the `sumo` package of the Python in use).
+/// The precedence: `package()` (the `sumo` package of the Python in use, the pinned
+/// `eclipse-sumo`), else `$SUMO_HOME`. The package comes first because `$SUMO_HOME` cannot be
+/// trusted inside a Python process: importing `libsumo` sets it to the data-only `sumo_data`
+/// folder (no `bin/`, no libraries) when it is unset.
 fn locate_sumo_home_with(package: impl FnOnce() -> Option<std::path::PathBuf>) -> Option<std::path::PathBuf> {
-    sumo_home_from_env().or_else(package)
+    package().or_else(sumo_home_from_env)
 }

@@ -1,10 +1,10 @@
 //! Where the SUMO installation (`SUMO_HOME`) is: the one lookup of the workspace, in the order
 //! docs/traffic.md documents ("Where SUMO is found"):
 //!
-//! 1. the `SUMO_HOME` environment variable, when set and non-empty, taken as is;
-//! 2. the folder of the `sumo` package (the `eclipse-sumo` wheel) of the Python in use: the
-//!    running interpreter when called through `_core` ([`SumoHome::locate_with`]), else
+//! 1. the folder of the `sumo` package (the pinned `eclipse-sumo` wheel) of the Python in use:
+//!    the running interpreter when called through `_core` ([`SumoHome::locate_with`]), else
 //!    `$PYO3_PYTHON`, else `python3` ([`SumoHome::locate`]);
+//! 2. the `SUMO_HOME` environment variable, when set and non-empty, taken as is;
 //! 3. none.
 //!
 //! `env/build.rs` includes the same steps (`locate.rs`) to find SUMO's headers.
@@ -18,14 +18,15 @@ include!("locate.rs");
 pub struct SumoHome(pub PathBuf);
 
 impl SumoHome {
-    /// `$SUMO_HOME`, else the `sumo` package of `$PYO3_PYTHON` or `python3` (a subprocess);
-    /// `None` when neither exists.
+    /// The `sumo` package of `$PYO3_PYTHON` or `python3` (asked once per process, a
+    /// subprocess), else `$SUMO_HOME`; `None` when neither exists.
     pub fn locate() -> Option<SumoHome> {
-        Self::locate_with(|| sumo_home_from_python(&sumo_home_python()))
+        static PACKAGE: std::sync::OnceLock<Option<PathBuf>> = std::sync::OnceLock::new();
+        Self::locate_with(|| PACKAGE.get_or_init(|| sumo_home_from_python(&sumo_home_python())).clone())
     }
 
-    /// `$SUMO_HOME`, else `package()`: the folder of the `sumo` package as the caller finds it
-    /// (the binding asks its own interpreter instead of starting one).
+    /// `package()`, else `$SUMO_HOME`: `package` finds the folder of the `sumo` package (the
+    /// binding asks its own interpreter instead of starting one).
     pub fn locate_with(package: impl FnOnce() -> Option<PathBuf>) -> Option<SumoHome> {
         locate_sumo_home_with(package).map(SumoHome)
     }
