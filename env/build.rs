@@ -4,17 +4,18 @@
 //! crate as `DH_SUMO_SHIM_DIR` and dependents' build scripts as `DEP_DH_SUMO_SHIM_DIR` (the
 //! Python binding copies them into its package).
 //!
-//! SUMO's C++ headers and client libraries come from the `eclipse-sumo` wheel: `$SUMO_HOME`, else
-//! the `sumo` package of the build's Python (`$PYO3_PYTHON`, else `python3`). Without them (or
+//! SUMO's C++ headers and client libraries come from the `eclipse-sumo` wheel, found as
+//! `dh_env::sumo_home` finds it at run time: the `sumo` package of the build's Python
+//! (`$PYO3_PYTHON`, else `python3`), else `$SUMO_HOME`. Without them (or
 //! without a C++ compiler) the build still succeeds, without the shims: SUMO mode then needs
 //! the Python `libsumo` transport. Nothing links SUMO.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 fn main() {
     println!("cargo:rerun-if-changed=sumo_shim/dh_sumo_shim.cpp");
     println!("cargo:rerun-if-changed=build.rs");
+    println!("cargo:rerun-if-changed=src/sumo_home/locate.rs");
     println!("cargo:rerun-if-env-changed=SUMO_HOME");
     println!("cargo:rerun-if-env-changed=PYO3_PYTHON");
     if std::env::var("CARGO_CFG_TARGET_OS").as_deref() != Ok("linux") {
@@ -54,15 +55,12 @@ fn main() {
     }
 }
 
+// The workspace's one `SUMO_HOME` lookup (`SumoHome::locate`'s steps); a build script cannot
+// call the crate it builds.
+include!("src/sumo_home/locate.rs");
+
 fn sumo_home() -> Option<PathBuf> {
-    if let Some(h) = std::env::var_os("SUMO_HOME").filter(|h| !h.is_empty()) {
-        return Some(PathBuf::from(h));
-    }
-    let python = std::env::var("PYO3_PYTHON").unwrap_or_else(|_| "python3".into());
-    let out = Command::new(python).args(["-c", "import sumo; print(sumo.SUMO_HOME)"]).output().ok()?;
-    let home = String::from_utf8(out.stdout).ok()?;
-    let home = home.trim();
-    (out.status.success() && !home.is_empty()).then(|| PathBuf::from(home))
+    locate_sumo_home_with(|| sumo_home_from_python(&sumo_home_python()))
 }
 
 fn build(include: &Path, lib: &Path, library: &str, define: Option<&str>, dest: &Path) -> Result<(), String> {

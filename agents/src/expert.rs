@@ -39,7 +39,7 @@
 use dh_env::geom::{wrap_angle, Polyline, Pose, Projection, Vec2};
 use dh_env::map::{LaneIdx, Network};
 use dh_env::view::{ActorKind, ActorView, LightColor, TrafficLightView};
-use dh_env::world::{VehicleParams, World};
+use dh_env::world::{step_bicycle, Control, EgoState, VehicleParams, World};
 use smallvec::SmallVec;
 
 /// Tuning of the expert. Defaults are the values the closed-loop tests were tuned with.
@@ -370,6 +370,9 @@ pub struct Expert {
     /// Allowed speed per metre ahead of `envelope_s0` (curves only), from the last decision.
     envelope: Vec<f64>,
     envelope_s0: f64,
+    /// The bicycle poses are predicted with ([`step_bicycle`], the world's own model): the
+    /// world's ego when given ([`Expert::set_vehicle`]), else `params`' steering geometry.
+    bicycle: VehicleParams,
 }
 
 /// Route point at arc `s`, extrapolated along the end headings beyond the ends.
@@ -452,8 +455,15 @@ impl Expert {
     /// Builds an expert; the parameters are checked by [`ExpertParams::validate`].
     pub fn new(params: ExpertParams) -> dh_env::Result<Self> {
         params.validate()?;
+        let bicycle = VehicleParams {
+            wheelbase_m: params.wheelbase_m,
+            rear_axle_to_center_m: params.rear_to_center_m,
+            max_steer_deg: params.max_wheel_angle_rad.to_degrees(),
+            ..VehicleParams::default()
+        };
         Ok(Self {
             params,
+            bicycle,
             last_steer: 0.0,
             s_hint: None,
             rest_time_s: 0.0,
@@ -606,23 +616,15 @@ impl Expert {
         (-delta / p.max_wheel_angle_rad).clamp(-1.0, 1.0)
     }
 
-    /// Integrates the ego's kinematic bicycle (centre reference) for `t` seconds at constant
-    /// speed and steer.
+    /// The ego's pose after `t` seconds at constant speed and steer: the world's kinematic
+    /// bicycle ([`step_bicycle`]) in steps of at most one tick, the speed held at `v`.
     fn predict_pose(&self, pose: Pose, v: f64, steer: f64, t: f64) -> Pose {
-        let p = &self.params;
-        let delta = self.steer_to_wheel(steer);
-        let beta = (p.rear_to_center_m / p.wheelbase_m * delta.tan()).atan();
+        let control = Control { throttle: 0.0, brake: 0.0, steer: steer.clamp(-1.0, 1.0) };
         let n = ((t / 0.05).ceil() as usize).clamp(1, 100);
         let dt = t / n as f64;
         let mut out = pose;
         for _ in 0..n {
-            let dir = Vec2::from_angle(out.yaw + beta);
-            out.pos += dir * (v * dt);
-            if p.rear_to_center_m > 0.0 {
-                out.yaw += v / p.rear_to_center_m * beta.sin() * dt;
-            } else {
-                out.yaw += v / p.wheelbase_m * delta.tan() * dt;
-            }
+            out = step_bicycle(&self.bicycle, &EgoState::new(out, v), &control, dt).pose;
         }
         out.yaw = wrap_angle(out.yaw);
         out
@@ -1464,6 +1466,7 @@ impl Expert {
         p.max_wheel_angle_rad = v.max_steer_deg.to_radians();
         if p.validate().is_ok() {
             self.params = p;
+            self.bicycle = *v;
         }
     }
 

@@ -11,6 +11,7 @@ pub mod render;
 pub mod scenario;
 pub mod score;
 pub mod sim;
+pub mod sumo_home;
 pub mod vehicle_params;
 pub mod view;
 pub mod world;

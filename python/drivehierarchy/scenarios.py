@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import functools
-import importlib.util
 import os
 from pathlib import Path
 
+from drivehierarchy import _core
 from drivehierarchy._core import ScenarioError
 
 DEFAULT_SCENARIO = "03_turning/town01_03_right_turn_signalised"
@@ -50,25 +50,20 @@ def resolve_scenario(scenario: str | Path | None) -> str:
 
 @functools.cache
 def sumo_home() -> str | None:
-    """SUMO_HOME of the installed `eclipse-sumo` package (for `sumo:` map paths), if any.
-
-    The package's own folder (`sumo.SUMO_HOME` is its `__init__`'s directory), found without
-    importing it: `import sumo` reads the wheel's metadata and costs 30-130 ms, which was most of
-    a first scenario load in a process (scripts/bench_suite_load.py).
+    """SUMO_HOME for `sumo:` map paths and for starting SUMO, if any: the folder of the installed
+    `eclipse-sumo` package, else `$SUMO_HOME` (`_core.sumo_home`, the one lookup of the workspace;
+    docs/traffic.md, "Where SUMO is found"). Fixed for the process after the first call.
     """
-    spec = importlib.util.find_spec("sumo")
-    if spec is None or spec.origin is None:
-        return None
-    return str(Path(spec.origin).parent)
+    return _core.sumo_home()
 
 
 def sumo_runtime_home() -> str:
     """`sumo_home()` for starting SUMO, with the environment `import sumo` would set up
     (`SUMO_HOME`, and `PROJ_LIB`/`PROJ_DATA` for its projection data) without paying for the
-    import; `ImportError` when `eclipse-sumo` is not installed."""
+    import; `ImportError` when there is neither the eclipse-sumo package nor `$SUMO_HOME`."""
     home = sumo_home()
     if home is None:
-        raise ImportError("no module named 'sumo' (the eclipse-sumo package)")
+        raise ImportError("no module named 'sumo' (the eclipse-sumo package) and no SUMO_HOME")
     os.environ.setdefault("SUMO_HOME", home)
     if not os.environ.get("PROJ_LIB") and not os.environ.get("PROJ_DATA"):
         os.environ["PROJ_LIB"] = os.environ["PROJ_DATA"] = os.path.join(home, "data", "proj")

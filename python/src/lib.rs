@@ -9,6 +9,7 @@ mod errors;
 mod facts;
 mod json;
 mod network;
+mod sumo_home;
 mod sumo_native;
 mod traffic;
 
@@ -21,5 +22,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     editor::register(m)?;
     benchmark::register(m)?;
     network::register(m)?;
+    sumo_home::register(m)?;
     Ok(())
 }

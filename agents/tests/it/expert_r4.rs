@@ -24,7 +24,7 @@ fn repo_root() -> PathBuf {
 }
 
 fn sumo_home() -> Option<PathBuf> {
-    dh_env::scenario::discover_sumo_home()
+    dh_env::sumo_home::SumoHome::locate().map(|h| h.0)
 }
 
 fn scenario_files() -> Vec<PathBuf> {

@@ -2,6 +2,8 @@
 //! errors, and resolution against the map into world-frame geometry ([`ResolvedScenario`]).
 
 pub mod json_schema;
+pub mod map_paths;
+pub mod model;
 pub mod parse;
 pub mod resolve;
 pub mod schema;
@@ -13,15 +15,18 @@ pub mod variation;
 pub mod variation_spec;
 
 pub use json_schema::{scenario_json_schema, scenario_json_schema_string};
-pub use parse::{parse_scenario_file, parse_scenario_str};
-pub use resolve::{
-    default_size, default_speed_mps, discover_sumo_home, offset_polyline, resolve_map_path,
-    set_builtin_maps_dir, vclass_of, ActorMotion, AtEnd, BrakeEvent, BrakeWhen, ChainEvent, LightProgram,
-    LoadOptions, MapCache, Pace, PaceMode, ResolvedActor, ResolvedEgo, ResolvedScenario, ScriptedPath,
-    Trigger, BUILTIN_PREFIX, DEFAULT_REFERENCE_SPEED_MPS, EGO_COLOR, ETA_MAX_OFFSET_M, ETA_MIN_SPEED_MPS,
-    PACE_GAIN_PER_S, PACE_SETTLED_M, PALETTE, SNAP_DISTANCE_M, SUMO_PREFIX,
+pub use map_paths::{
+    resolve_map_path, set_builtin_maps_dir, LoadOptions, MapCache, BUILTIN_PREFIX, SUMO_PREFIX,
 };
+pub use model::{
+    ActorMotion, AtEnd, BrakeEvent, BrakeWhen, ChainEvent, LightProgram, Pace, PaceMode, ResolvedActor,
+    ResolvedEgo, ResolvedScenario, ScriptedPath, Trigger, DEFAULT_REFERENCE_SPEED_MPS, EGO_COLOR,
+    ETA_MAX_OFFSET_M, PALETTE,
+};
+pub use parse::{parse_scenario_file, parse_scenario_str};
+pub use resolve::{default_speed_mps, offset_polyline, SNAP_DISTANCE_M};
 pub use schema::{ScenarioFile, CATEGORIES, SCENARIO_VERSION};
+pub use tables::{default_size, vclass_of};
 pub use traffic::seeded_rng;
 pub use traffic::{TrafficDemand, TrafficMode};
 pub use variation_spec::{Variation, VariationSpec};

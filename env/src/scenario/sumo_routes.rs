@@ -3,7 +3,7 @@
 //! `[traffic]` table through `traffic`): keeping them in `traffic` made `traffic` ↔ `resolve` a
 //! cycle.
 
-use super::resolve::{ActorMotion, ResolvedActor, ResolvedEgo};
+use super::model::{ActorMotion, ResolvedActor, ResolvedEgo};
 use super::traffic::{
     actor_vclass, FlowRate, LaneChoice, MirrorSpec, SpeedChoice, TrafficDemand, SUMO_EGO_ROUTE,
 };

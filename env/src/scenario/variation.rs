@@ -8,7 +8,7 @@
 //! element (the ego, actor i, obstacle i, traffic), so adding an actor does not change how the
 //! others vary.
 
-use super::resolve::{ActorMotion, BrakeEvent, BrakeWhen, PaceMode, ResolvedScenario, ScriptedPath, Trigger};
+use super::model::{ActorMotion, BrakeEvent, BrakeWhen, PaceMode, ResolvedScenario, ScriptedPath, Trigger};
 use super::traffic::{seeded_rng, SplitMix, TrafficDemand};
 use super::variation_spec::{default_actor_start_m, Variation};
 use crate::geom::{Polyline, Pose, Vec2};

@@ -4,8 +4,8 @@
 //! 2. advance the ego (kinematic bicycle, [`vehicle`]);
 //! 3. advance time;
 //! 4. traffic lights ([`lights`]);
-//! 5. scenario actors (triggers, scripted paths, brake events) in id order, except that an actor
-//!    with a chained trigger steps after the actor it follows;
+//! 5. scenario actors (triggers, scripted paths, brake events; [`scripted`]) in id order, except
+//!    that an actor with a chained trigger steps after the actor it follows;
 //! 6. collisions (rapier2d, [`collision`]);
 //! 7. off-road test at the ego centre.
 //!
@@ -21,6 +21,7 @@
 pub mod collision;
 pub mod idm;
 pub mod lights;
+pub mod scripted;
 pub mod sumo;
 pub mod traffic;
 pub mod vehicle;
@@ -32,13 +33,16 @@ pub use vehicle::{longitudinal_accel, sanitize_control, step_bicycle, EgoState, 
 use crate::geom::{Pose, Vec2};
 use crate::map::Network;
 use crate::scenario::{
-    ActorMotion, AtEnd, BrakeEvent, BrakeWhen, ChainEvent, PaceMode, ResolvedScenario, ScriptedPath, Trigger,
-    ETA_MAX_OFFSET_M, ETA_MIN_SPEED_MPS, PACE_GAIN_PER_S, PACE_SETTLED_M,
+    ActorMotion, BrakeWhen, ChainEvent, PaceMode, ResolvedScenario, ScriptedPath, Trigger, ETA_MAX_OFFSET_M,
 };
 use crate::view::{ActorKind, ActorView, ContactClass, LightColor, SignView, TrafficLightView};
 use crate::{Error, Result, DT_S};
 use collision::CollisionWorld;
 use rapier2d::prelude::ColliderHandle;
+use scripted::{
+    path_pose, smoothing_m, step_scripted, EgoRelative, Phase, ETA_MIN_SPEED_MPS, PACE_GAIN_PER_S,
+    PACE_SETTLED_M,
+};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -78,15 +82,6 @@ pub struct TickReport {
     /// The ego centre crossed the stop line of a red signal head during this tick (heading
     /// within 60° of the lane, laterally within the lane width).
     pub ran_red_light: bool,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Phase {
-    Waiting,
-    Moving,
-    Braking,
-    Holding { until_s: f64 },
-    Done,
 }
 
 #[derive(Debug, Clone)]
@@ -150,21 +145,6 @@ pub struct World {
     ego_route: crate::geom::Polyline,
     ego_route_s: f64,
     track_route: bool,
-}
-
-/// Smooth heading along a path: direction of the chord over ±`h` around `s`.
-fn path_pose(path: &crate::geom::Polyline, s: f64, h: f64) -> Pose {
-    let p = path.point_at(s);
-    let len = path.length();
-    let a = path.point_at((s - h).max(0.0));
-    let b = path.point_at((s + h).min(len));
-    let d = b - a;
-    let yaw = if d.norm_sq() > 1e-12 { d.angle() } else { path.heading_at(s) };
-    Pose::new(p, yaw)
-}
-
-fn smoothing_m(length_m: f64) -> f64 {
-    (0.25 * length_m).clamp(0.25, 2.0)
 }
 
 impl World {
@@ -844,106 +824,4 @@ fn crossed_red_stop_line(heads: &[TrafficLightView], from: Vec2, to: Pose) -> bo
             && lateral.abs() <= 0.5 * h.lane_width_m
             && (to.yaw - h.stop_line.yaw).cos() > 0.5
     })
-}
-
-/// The ego-relative inputs of one scripted-actor step.
-#[derive(Debug, Clone, Copy, Default)]
-struct EgoRelative {
-    /// Speed its `pace` asks for now (None: not pacing, the leg speed applies).
-    pace_mps: Option<f64>,
-    /// An ego-relative or chained brake condition holds now.
-    brake_due: bool,
-    /// Gap pacing: whether the gap is within tolerance of its target (None: not measured).
-    gap_settled: Option<bool>,
-}
-
-/// One scripted-actor step (`fire`: its start trigger holds now); returns true when the actor
-/// leaves the world.
-#[allow(clippy::too_many_arguments)]
-fn step_scripted(
-    id: u32,
-    view: &mut ActorView,
-    s: &mut f64,
-    phase: &mut Phase,
-    triggered_at_s: &mut f64,
-    brake_pending: &mut bool,
-    p: &ScriptedPath,
-    t: f64,
-    fire: bool,
-    rel: EgoRelative,
-    triggered: &mut Vec<u32>,
-) -> bool {
-    let prev_speed = view.speed_mps;
-    if *phase == Phase::Waiting {
-        if !fire {
-            return false;
-        }
-        triggered.push(id);
-        *phase = Phase::Moving;
-        *triggered_at_s = t;
-        view.speed_mps = p.initial_speed_mps;
-    }
-    // Brake event.
-    if *brake_pending && *phase == Phase::Moving {
-        if let Some(BrakeEvent { when, .. }) = p.brake {
-            let due = match when {
-                BrakeWhen::AtS(at) => *s >= at,
-                BrakeWhen::AfterS(dt) => t - *triggered_at_s >= dt - 1e-9,
-                _ => rel.brake_due,
-            };
-            if due {
-                *brake_pending = false;
-                *phase = Phase::Braking;
-            }
-        }
-    }
-    let mut v = view.speed_mps;
-    match *phase {
-        Phase::Braking => {
-            let b = p.brake.unwrap_or(BrakeEvent {
-                when: BrakeWhen::AtS(0.0),
-                decel_mps2: 1.0,
-                to_speed_mps: 0.0,
-                hold_s: None,
-            });
-            v = (v - b.decel_mps2 * DT_S).max(b.to_speed_mps);
-            if v <= b.to_speed_mps {
-                *phase = match b.hold_s {
-                    Some(h) => Phase::Holding { until_s: t + h },
-                    None => Phase::Holding { until_s: f64::INFINITY },
-                };
-            }
-        }
-        Phase::Holding { until_s } => {
-            if t >= until_s {
-                *phase = Phase::Moving;
-            }
-        }
-        Phase::Moving => {
-            let target = rel.pace_mps.unwrap_or_else(|| p.leg_speed(*s));
-            let dv = p.accel_mps2 * DT_S;
-            v = if v < target { (v + dv).min(target) } else { (v - dv).max(target) };
-        }
-        Phase::Waiting | Phase::Done => {}
-    }
-    if *phase == Phase::Done {
-        v = 0.0;
-    }
-    let len = p.path.length();
-    *s += v * DT_S;
-    if *s >= len {
-        *s = len;
-        if *phase != Phase::Done {
-            *phase = Phase::Done;
-            if p.at_end == AtEnd::Remove {
-                return true;
-            }
-        }
-        v = 0.0;
-    }
-    view.speed_mps = v;
-    // Brake lamps: lit while slowing down, and while standing after that until it drives off.
-    view.braking = v < prev_speed - 1e-9 || (v <= 1e-9 && view.braking);
-    view.pose = path_pose(&p.path, *s, smoothing_m(view.length_m));
-    false
 }

@@ -15,13 +15,7 @@ fn nets() -> Vec<PathBuf> {
         root.join("../shared/official/Close_Loop_Evaluation/Carla_Simulation/Co-Simulation/Sumo/tongji/tongji.net.xml"),
         root.join("scenarios/maps/town01/town01.net.xml"),
     ];
-    if let Some(h) = std::env::var_os("SUMO_HOME").map(PathBuf::from).or_else(|| {
-        let o = std::process::Command::new("python3")
-            .args(["-c", "import sumo; print(sumo.SUMO_HOME)"])
-            .output()
-            .ok()?;
-        Some(PathBuf::from(String::from_utf8(o.stdout).ok()?.trim()))
-    }) {
+    if let Some(dh_env::sumo_home::SumoHome(h)) = dh_env::sumo_home::SumoHome::locate() {
         for rel in [
             "tools/game/fkk_in/ingolstadt.net.xml.gz",
             "tools/game/bs3d/bs.net.xml",

@@ -17,7 +17,7 @@ fn tongji_path() -> PathBuf {
 }
 
 fn sumo_home() -> Option<PathBuf> {
-    dh_env::scenario::discover_sumo_home()
+    dh_env::sumo_home::SumoHome::locate().map(|h| h.0)
 }
 
 fn load_or_skip(path: &Path) -> Option<Network> {

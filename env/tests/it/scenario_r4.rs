@@ -3,8 +3,8 @@
 //! obstacles in the path and red lights) at S_R4 ≥ 90 by the protocol's score tracker; the
 //! hazard scenarios make the same driver crash when it ignores actors.
 //!
-//! `sumo:` maps need SUMO_HOME (the env var, else `python3 -c "import sumo"`); without it those
-//! scenarios are skipped with a message.
+//! `sumo:` maps need SUMO_HOME (`SumoHome::locate`: the `sumo` package of `$PYO3_PYTHON` or
+//! `python3`, else the env var); without it those scenarios are skipped with a message.
 
 use dh_env::drive::{ActuationBridge, Control, Decision};
 use dh_env::geom::{Polyline, Vec2};
@@ -24,7 +24,7 @@ fn repo_root() -> PathBuf {
 }
 
 fn sumo_home() -> Option<PathBuf> {
-    dh_env::scenario::discover_sumo_home()
+    dh_env::sumo_home::SumoHome::locate().map(|h| h.0)
 }
 
 fn scenario_files() -> Vec<PathBuf> {

@@ -1,7 +1,7 @@
 //! The SUMO orchestration (`world::sumo`) with live traffic, on every shim transport: libsumo
 //! in this process and TraCI to a `sumo` subprocess. Skips (passing, with a note) when this
-//! build has no SUMO shims or no SUMO installation is found (`$SUMO_HOME`, else the `sumo`
-//! package of `python3`).
+//! build has no SUMO shims or no SUMO installation is found (`SumoHome::locate`, docs/traffic.md
+//! "Where SUMO is found").
 
 use dh_env::drive::{Control, Decision};
 use dh_env::scenario::LoadOptions;

@@ -8,6 +8,7 @@
 //! `libsumo` Python module's).
 
 use super::transport::{Placed, SumoTransport, TypeInfo, VehicleState};
+pub use crate::sumo_home::SumoHome;
 use crate::{Error, Result};
 use libloading::os::unix::{Library, RTLD_LOCAL, RTLD_NOW};
 use std::ffi::{c_char, c_int, CStr, CString};
@@ -46,31 +47,7 @@ impl Flavour {
     }
 }
 
-/// An `eclipse-sumo` installation (its `SUMO_HOME`).
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct SumoHome(pub PathBuf);
-
 impl SumoHome {
-    /// `$SUMO_HOME`, else the `sumo` package of `python3` (the pinned `eclipse-sumo` wheel);
-    /// `None` when neither exists.
-    pub fn locate() -> Option<SumoHome> {
-        if let Some(h) = std::env::var_os("SUMO_HOME").filter(|h| !h.is_empty()) {
-            return Some(SumoHome(PathBuf::from(h)));
-        }
-        let out = std::process::Command::new("python3")
-            .args(["-c", "import sumo; print(sumo.SUMO_HOME)"])
-            .output()
-            .ok()?;
-        let home = String::from_utf8(out.stdout).ok()?;
-        let home = home.trim();
-        (out.status.success() && !home.is_empty()).then(|| SumoHome(PathBuf::from(home)))
-    }
-
-    /// The `sumo` binary.
-    pub fn binary(&self) -> PathBuf {
-        self.0.join("bin").join("sumo")
-    }
-
     /// A client library of this installation (`lib64`, else `lib`).
     pub fn library(&self, flavour: Flavour) -> PathBuf {
         let name = flavour.library();
