@@ -6,8 +6,7 @@ use crate::env::{err, map_cache};
 use dh_env::geom::{Pose, Vec2};
 use dh_env::map::{EdgeFunction, Network};
 use dh_env::scenario::{
-    parse_scenario_str, resolve_map_path, ActorMotion, LightProgram, LoadOptions, ResolvedScenario, Summary,
-    Trigger,
+    resolve_map_path, ActorMotion, LightProgram, LoadOptions, ResolvedScenario, Scenario, Summary, Trigger,
 };
 use pyo3::prelude::*;
 use serde_json::{json, Value};
@@ -264,16 +263,8 @@ pub fn scenario_geometry(
     sumo_home: Option<PathBuf>,
 ) -> PyResult<String> {
     let opts = LoadOptions { sumo_home, cache: Some(map_cache()) };
-    let s = py.detach(|| resolve_text(Path::new(path), text, &opts)).map_err(|e| err(py, e))?;
+    let s = py.detach(|| Scenario::load_str(path, text, &opts)).map_err(|e| err(py, e))?;
     Ok(scenario_json(&s).to_string())
-}
-
-/// Parses and resolves scenario text standing for the file at `path` (what `Scenario::load_with`
-/// does after reading the file).
-pub(crate) fn resolve_text(path: &Path, text: &str, opts: &LoadOptions) -> dh_env::Result<ResolvedScenario> {
-    let spec = parse_scenario_str(path, text)?;
-    dh_env::scenario::resolve::resolve(path, &spec, opts)
-        .map_err(|e| dh_env::scenario::parse::locate(e, path, text))
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -7,7 +7,7 @@ use crate::sumo_native::PySumoSession;
 use dh_agents::expert::{Expert, ExpertParams};
 use dh_env::drive::{ActuationBridge, Control, Decision, DecisionFailure};
 use dh_env::render::{BevConfig, CameraConfig, GifWriter, Image};
-use dh_env::scenario::{LoadOptions, MapCache};
+use dh_env::scenario::{LoadOptions, MapCache, Scenario};
 use dh_env::sim::{Action, ActionMode, FrameSnapshot, Observation, Sim, SimConfig, StepInfo};
 use numpy::ndarray::Array3;
 use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1};
@@ -53,7 +53,7 @@ impl PySim {
         let inner = py
             .detach(|| match text {
                 None => Sim::new(&path, config, &load),
-                Some(t) => Sim::from_scenario(crate::editor::resolve_text(&path, t, &load)?, config),
+                Some(t) => Sim::from_scenario(Scenario::load_str(&path, t, &load)?, config),
             })
             .map_err(|e| err(py, e))?;
         let expert = Expert::new(ExpertParams::default()).map_err(|e| err(py, e))?;
