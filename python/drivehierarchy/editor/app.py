@@ -170,7 +170,7 @@ class Editor:
 
     def _resolve(self, rel: str, text: str) -> dict[str, Any]:
         try:
-            geo = json.loads(_core.scenario_geometry(str(self.abs_path(rel)), text, sumo_home()))
+            geo = _core.scenario_geometry(str(self.abs_path(rel)), text, sumo_home())
         except DriveHierarchyError as exc:
             msg = str(exc).replace(str(self.root) + os.sep, "")
             return {"ok": False, "error": files.parse_error(msg)}
@@ -293,7 +293,7 @@ def create_app(
         rel = request.query_params.get("path")
         if rel:
             spec = ed.map_spec_for(rel, spec)
-        return Response(_core.map_geometry(spec, sumo_home()), media_type="application/json")
+        return JSONResponse(_core.map_geometry(spec, sumo_home()))
 
     def snap(request: Request, body: bytes) -> Response:
         d = _json(body)

@@ -141,7 +141,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
             return
         self._live = False
         text, self._scenario_text = self._scenario_text, None  # only for the first scenario
-        self._sim = _core.Sim(path, self.config.to_json(), sumo_home(), text)
+        self._sim = _core.Sim(path, self.config.to_core(), sumo_home(), text)
         self._scenario_path = path
         self._configure_traffic()
 

@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import hashlib
 import io
-import json
 import math
 import random
 from collections.abc import Callable, Iterable, Sequence
@@ -524,7 +523,7 @@ def rollout(
             picked = [nd for nd, share in zip(needs, shares, strict=True) if u < share]
             for s, cams in frame_plan(picked, a).items():
                 plan.setdefault(s, set()).update(cams)
-        cfgs = {name: json.dumps(camera_config(name, size)) for name in SURROUND}
+        cfgs = {name: camera_config(name, size) for name in SURROUND}
         step = 0
         while True:
             ego = sim.ego_array()
