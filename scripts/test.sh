@@ -67,6 +67,7 @@ export PATH="$PWD/.venv/bin:$PATH"
 step "ruff";     $PY -m ruff check .
                  $PY -m ruff format --check .
 step "stubtest"; $PY -m mypy.stubtest drivehierarchy._core --allowlist python/stubtest-allowlist.txt
+step "mypy";     $PY -m mypy  # [tool.mypy] in pyproject.toml: strict on envs, agents, benchmark
 step "docs";     DISABLE_MKDOCS_2_WARNING=true NO_MKDOCS_2_WARNING=1 $PY -m mkdocs build --strict --quiet --site-dir "$(mktemp -d)"
 # Two workers, each taking whole files (`--dist loadfile`): a file's module fixtures (the docs
 # walk's shared folder, a loopback server) stay in one process. (Three were not faster: the work

@@ -60,7 +60,7 @@ LEFT_HAND_BOXES = {
 }
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     mp = sub.add_parser("map", help="road networks")
     cmds = mp.add_subparsers(dest="map_command", required=True)
     osm = cmds.add_parser(

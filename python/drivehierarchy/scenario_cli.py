@@ -14,7 +14,7 @@ from drivehierarchy.scenarios import builtin_scenarios, resolve_scenario, scenar
 from drivehierarchy.suite_probe import SWEEP
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     sc = sub.add_parser("scenario", help="scenario files")
     cmds = sc.add_subparsers(dest="scenario_command", required=True)
     v = cmds.add_parser("validate", help="check scenario files; exit 1 if any is invalid")
@@ -239,7 +239,7 @@ def _list(args: argparse.Namespace) -> int:
 
 def _show(args: argparse.Namespace) -> int:
     path = Path(resolve_scenario(args.scenario))
-    summary = _core.validate_scenario(str(path), sumo_home())
+    summary: dict[str, Any] = dict(_core.validate_scenario(str(path), sumo_home()))
     doc = _toml(path)
     summary["description"] = doc.get("description", "")
     summary["duration_s"] = doc.get("duration_s")

@@ -447,7 +447,7 @@ def markdown(s: Summary) -> str:
             if c is None:
                 row.append("–")
             else:
-                top = max(s.categories, key=lambda cat: s.table[c][cat])
+                top = max(s.categories, key=lambda cat: s.table[c][cat])  # type: ignore[index]
                 row.append(f"{_f(s.overall[c])} ({_f(s.table[c][top])} {top[:2]})")
         out.append(f"| {f} | " + " | ".join(row) + " |")
     out.append("")

@@ -15,7 +15,7 @@ from typing import Any
 from drivehierarchy._core import ConfigError
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     bl = sub.add_parser("baselines", help="RL and imitation baselines (needs the `rl` extra)")
     cmds = bl.add_subparsers(dest="baselines_command", required=True)
 

@@ -14,7 +14,7 @@ ActionMode = Literal["decision", "raw"]
 
 # Every default the Rust core also has is read from it (`SimConfig::default()`): one definition.
 # tests/envs/test_config_parity.py checks that the dataclasses below agree with it field by field.
-_RUST_DEFAULTS: dict[str, Any] = _core.default_sim_config()
+_RUST_DEFAULTS = _core.default_sim_config()
 
 
 def _rust_default(*keys: str) -> Any:
@@ -105,7 +105,8 @@ class R4Config:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> R4Config:
         """Builds a config from plain values, rejecting unknown keys with the key named."""
-        return _from_dict(cls, data, "")
+        config: R4Config = _from_dict(cls, data, "")
+        return config
 
     def to_core(self) -> dict[str, Any]:
         """The settings the Rust core reads (`_core.Sim`; the scenario travels separately)."""

@@ -79,7 +79,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
     call raises `gymnasium.error.ClosedEnvironmentError`.
     """
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 4}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 4}  # type: ignore[misc]
 
     def __init__(
         self,
@@ -224,9 +224,10 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
     def decision_log(self) -> list[dict[str, Any]]:
         """Every decision of the episode: decision, tick, raw reply, parsed action, failure, control."""
         self._check_open("decision_log")
-        return self._sim.decision_log()
+        log: list[dict[str, Any]] = self._sim.decision_log()
+        return log
 
-    def render(self) -> np.ndarray | None:  # type: ignore[override]
+    def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array":
             return None
         self._check_live("render")
@@ -264,6 +265,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
     # -- helpers ---------------------------------------------------------------------------
     def _shape_obs(self, raw: dict[str, Any]) -> dict[str, Any]:
         out: dict[str, Any] = {}
+        assert isinstance(self.observation_space, gym.spaces.Dict)
         for key in self.observation_space.spaces:
             out[key] = raw[key]
         return out
@@ -276,7 +278,8 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
     def score(self) -> dict[str, Any]:
         """The scene score record so far (final once the episode has terminated)."""
         self._check_open("score")
-        return self._sim.score()
+        record: dict[str, Any] = self._sim.score()
+        return record
 
     # -- background traffic (envs/traffic) -----------------------------------------------------
     @property
@@ -328,5 +331,5 @@ def _shallow(config: R4Config) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for f in dataclasses.fields(config):
         v = getattr(config, f.name)
-        out[f.name] = dataclasses.asdict(v) if dataclasses.is_dataclass(v) else v
+        out[f.name] = dataclasses.asdict(v) if dataclasses.is_dataclass(v) and not isinstance(v, type) else v
     return out

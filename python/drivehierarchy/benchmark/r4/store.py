@@ -118,7 +118,7 @@ def sha256_of(path: Path) -> str:
 
 
 def write_manifest(out: Path, jobs: list[Job], opts: RunOptions) -> None:
-    manifest = {
+    manifest: dict[str, Any] = {
         "drivehierarchy_version": __version__,
         "git_commit": git_commit(),
         "agent": opts.agent,

@@ -197,6 +197,7 @@ async def drive_vlm_scene(
         if aborted is None and stats.valid == 0:
             aborted = "no_valid_decision"
         wall = time.perf_counter() - t0
+        line: dict[str, Any]
         if aborted is not None:
             line = {
                 "key": job.key,
