@@ -360,3 +360,18 @@ def test_runner_video_writes_one_gif_frame_per_decision(tmp_path: Path) -> None:
     with Image.open(gif) as im:
         assert im.size == (400, 225)
         assert im.n_frames == results[0]["steps"]
+
+
+def test_settings_go_in_as_dataclasses_or_dicts_and_errors_name_field_and_value() -> None:
+    env = no_image_env(LEAD_BRAKES)
+    env.reset(seed=0)
+    sim = env.unwrapped.sim
+    cam = CameraConfig(width=160, height=90)
+    assert np.array_equal(sim.render_camera(cam), sim.render_camera(dataclasses.asdict(cam)))
+    with pytest.raises(drivehierarchy.ConfigError, match=r"`camera\.width` = -3: "):
+        sim.render_camera({**dataclasses.asdict(cam), "width": -3})
+    core = R4Config(front=None, bev=None).to_core()
+    front = {**dataclasses.asdict(CameraConfig()), "fov_deg": "wide"}
+    with pytest.raises(drivehierarchy.ConfigError, match=r"`config\.front\.fov_deg` = 'wide': "):
+        _core.Sim(resolve_scenario(LEAD_BRAKES), {**core, "front": front})
+    env.close()
