@@ -75,23 +75,23 @@ def pin_one_core() -> str:
     return f"pinned to CPU {cpu}"
 
 
-def camera_json(**kw: Any) -> str:
+def camera_config(**kw: Any) -> Any:
     from drivehierarchy.envs.config import CameraConfig
 
-    return json.dumps(dataclasses.asdict(CameraConfig(**kw)))
+    return CameraConfig(**kw)
 
 
-def bev_json(**kw: Any) -> str:
+def bev_config(**kw: Any) -> Any:
     from drivehierarchy.envs.config import BevConfig
 
-    return json.dumps(dataclasses.asdict(BevConfig(**kw)))
+    return BevConfig(**kw)
 
 
 def bench_sim(sim: Any, seconds: float) -> dict[str, Rate]:
-    front = camera_json()
-    front400 = camera_json(width=400, height=225)
-    bev = bev_json()
-    bev128 = bev_json(size_px=128, px_per_m=2.0)  # the RL view (BevConfig::rl)
+    front = camera_config()
+    front400 = camera_config(width=400, height=225)
+    bev = bev_config()
+    bev128 = bev_config(size_px=128, px_per_m=2.0)  # the RL view (BevConfig::rl)
 
     def pair() -> None:
         a = sim.render_camera(front)
@@ -123,7 +123,7 @@ def drive_to_mid_episode(scenario: str, decisions: int) -> tuple[Any, Any, int]:
 
 
 def in_view(sim: Any) -> int:
-    return sum(1 for a in sim.project_actors(camera_json()) if a["pixel_count"] > 0)
+    return sum(1 for a in sim.project_actors(camera_config()) if a["pixel_count"] > 0)
 
 
 def tongji_scenario(tmp: Path) -> Path | None:

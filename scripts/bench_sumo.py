@@ -165,12 +165,11 @@ def _world_seed(seed: int) -> int:
 
 
 def _net_path(scenario: Path) -> str:
-    import json
 
     from drivehierarchy import _core
     from drivehierarchy.scenarios import sumo_home
 
-    return str(json.loads(_core.validate_scenario(str(scenario), sumo_home()))["map"])
+    return str(_core.validate_scenario(str(scenario), sumo_home())["map"])
 
 
 def _warmup(scenario: Path) -> int:

@@ -179,7 +179,7 @@ def expert_episode(scenario: str, backend: str) -> dict[str, Any]:
     env = DriveHierarchyR4Env(scenario=scenario, sumo_backend=backend)
     try:
         rec = run_episode(env, ExpertAgent(), seed=0).score
-        again = json.loads(_core.rescore(env.sim.episode_log()))
+        again = _core.rescore(env.sim.episode_log())
         return {
             "error": None,
             "termination": rec["termination_reason"],

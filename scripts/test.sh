@@ -107,6 +107,7 @@ if [ "$quick" = 1 ]; then
     step "ruff";      $PY -m ruff check .
                       $PY -m ruff format --check .
     step "stubtest";  $PY -m mypy.stubtest drivehierarchy._core --allowlist python/stubtest-allowlist.txt
+    step "mypy";      $PY -m mypy
     step "pytest (quick)"
     $PY -m pytest tests -n 2 --dist loadfile -q --durations=10 "${QUICK_SKIP[@]}" "$@"
     step "done"
@@ -144,6 +145,7 @@ checks_lane() {
     step "checks: ruff";     $PY -m ruff check .
                              $PY -m ruff format --check .
     step "checks: stubtest"; $PY -m mypy.stubtest drivehierarchy._core --allowlist python/stubtest-allowlist.txt
+    step "checks: mypy";     $PY -m mypy  # [tool.mypy] in pyproject.toml: strict on envs, agents, benchmark
     step "checks: docs";     DISABLE_MKDOCS_2_WARNING=true NO_MKDOCS_2_WARNING=1 $PY -m mkdocs build --strict --site-dir "$(mktemp -d)"
     step "checks: done"
 }

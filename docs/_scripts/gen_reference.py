@@ -101,7 +101,7 @@ def env_page() -> str:
         "|---|---|",
     ]
     parts += [f"| {i} | `{name}` |" for i, name in enumerate(STATE_FIELDS)]
-    rust = json.loads(_core.default_sim_config())
+    rust = _core.default_sim_config()
     parts += ["", "## `R4Config`", "", inspect.cleandoc(config_mod.R4Config.__doc__ or ""), ""]
     parts += [config_table(config_mod.R4Config), ""]
     for cls in (config_mod.CameraConfig, config_mod.BevConfig):
@@ -177,7 +177,7 @@ def _props_table(obj: dict[str, Any]) -> list[str]:
 
 
 def schema_page() -> str:
-    schema = json.loads(_core.scenario_json_schema())
+    schema = _core.scenario_json_schema()
     defs = schema.get("definitions") or schema.get("$defs") or {}
     parts = [
         "# Scenario format reference",

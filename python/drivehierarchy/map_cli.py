@@ -60,7 +60,7 @@ LEFT_HAND_BOXES = {
 }
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     mp = sub.add_parser("map", help="road networks")
     cmds = mp.add_subparsers(dest="map_command", required=True)
     osm = cmds.add_parser(
@@ -198,7 +198,7 @@ def check_network(net: Path) -> dict[str, Any]:
             + f"\n\n[ego]\nroute_edges = {edges}\n",
             encoding="utf-8",
         )
-        summary = json.loads(_core.validate_scenario(str(f), None))
+        summary = _core.validate_scenario(str(f), None)
     tls = {j.getID() for j in snet.getNodes() if j.getType() == "traffic_light"}
     return {
         "net": str(net),
@@ -292,7 +292,7 @@ def _show(args: argparse.Namespace) -> int:
 
     if not args.net.startswith(("sumo:", "builtin:")) and not Path(args.net).exists():
         raise ConfigError(f"map `{args.net}`: {args.net} does not exist")
-    net = json.loads(_core.map_summary(args.net, sumo_home()))
+    net = _core.map_summary(args.net, sumo_home())
     edges = [e for e in net["edges"] if args.all or e["function"] == "normal"]
     if args.edge:
         unknown = sorted(set(args.edge) - {e["id"] for e in net["edges"]})

@@ -16,7 +16,7 @@ from drivehierarchy.scenarios import builtin_scenarios, resolve_scenario, scenar
 from drivehierarchy.suite_probe import SWEEP
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     sc = sub.add_parser("scenario", help="scenario files")
     cmds = sc.add_subparsers(dest="scenario_command", required=True)
     v = cmds.add_parser("validate", help="check scenario files; exit 1 if any is invalid")
@@ -143,7 +143,7 @@ def _validate(args: argparse.Namespace) -> int:
     bad = 0
     for f in _expand(args.files):
         try:
-            summary = json.loads(_core.validate_scenario(str(f), sumo_home()))
+            summary = _core.validate_scenario(str(f), sumo_home())
         except DriveHierarchyError as exc:
             bad += 1
             print(f"INVALID {exc}")
@@ -155,8 +155,13 @@ def _validate(args: argparse.Namespace) -> int:
     return 1 if bad else 0
 
 
+def schema_text() -> str:
+    """The scenario JSON Schema as docs/scenario.schema.json holds it."""
+    return json.dumps(_core.scenario_json_schema(), indent=2, ensure_ascii=False) + "\n"
+
+
 def _schema(args: argparse.Namespace) -> int:
-    text = _core.scenario_json_schema()
+    text = schema_text()
     if args.out is None:
         print(text, end="")
         return 0
@@ -242,7 +247,7 @@ def _list(args: argparse.Namespace) -> int:
 
 def _show(args: argparse.Namespace) -> int:
     path = Path(resolve_scenario(args.scenario))
-    summary = json.loads(_core.validate_scenario(str(path), sumo_home()))
+    summary: dict[str, Any] = dict(_core.validate_scenario(str(path), sumo_home()))
     doc = _toml(path)
     summary["description"] = doc.get("description", "")
     summary["duration_s"] = doc.get("duration_s")

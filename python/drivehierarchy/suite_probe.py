@@ -33,9 +33,12 @@ from collections.abc import Iterable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from drivehierarchy._core import ConfigError
+
+if TYPE_CHECKING:
+    from drivehierarchy.agents.base import Agent
 
 FOLLOWER_SPEEDS = (4, 6, 8, 10, 12)
 CONSTANT_SPEEDS = (2, 4, 6, 8, 10, 12)
@@ -120,7 +123,7 @@ def parse_seeds(spec: str) -> tuple[int, ...]:
     return tuple(seeds)
 
 
-def _agent(cell: str) -> Any:
+def _agent(cell: str) -> Agent:
     from drivehierarchy.agents.base import ConstantAgent
     from drivehierarchy.agents.expert import ExpertAgent
     from drivehierarchy.agents.follower import LateExpertAgent, LightObeyingFollowerAgent, RouteFollowerAgent
@@ -447,7 +450,7 @@ def markdown(s: Summary) -> str:
             if c is None:
                 row.append("–")
             else:
-                top = max(s.categories, key=lambda cat: s.table[c][cat])
+                top = max(s.categories, key=lambda cat: s.table[c][cat])  # type: ignore[index]
                 row.append(f"{_f(s.overall[c])} ({_f(s.table[c][top])} {top[:2]})")
         out.append(f"| {f} | " + " | ".join(row) + " |")
     out.append("")

@@ -11,6 +11,7 @@ use dh_benchmark::{Rank, ScoreOptions, TaskId, TASKS};
 use pyo3::exceptions::PyOSError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
+use pythonize::{depythonize, pythonize};
 
 /// Data errors become `drivehierarchy.ConfigError` (a ValueError); I/O errors `OSError`.
 fn to_pyerr(py: Python<'_>, err: dh_benchmark::Error) -> PyErr {
@@ -66,60 +67,66 @@ fn openloop_task_from_stem(py: Python<'_>, stem: &str) -> PyResult<&'static str>
     TaskId::from_stem(stem).map(TaskId::as_str).map_err(|e| to_pyerr(py, e))
 }
 
-/// Task id of a released record given as JSON text.
+/// A released record (or an answer) as the JSON value it was read from.
+fn json_value(py: Python<'_>, what: &str, obj: &Bound<'_, PyAny>) -> PyResult<serde_json::Value> {
+    depythonize(obj).map_err(|e| config_error(py, format!("{what}: not plain JSON data: {e}")))
+}
+
+/// Task id of a released record (a dict as `json.loads` reads it).
 #[pyfunction]
-fn openloop_task_from_record(py: Python<'_>, record_json: &str) -> PyResult<&'static str> {
-    let v: serde_json::Value = serde_json::from_str(record_json)
-        .map_err(|e| config_error(py, format!("record: invalid JSON: {e}")))?;
+fn openloop_task_from_record(py: Python<'_>, record: &Bound<'_, PyAny>) -> PyResult<&'static str> {
+    let v = json_value(py, "record", record)?;
     TaskId::from_record(&v).map(TaskId::as_str).map_err(|e| to_pyerr(py, e))
 }
 
-/// Scores one reply against a ground truth given as JSON text (the record's `answer`,
-/// `ground_truth` or `ground_truth_order` value). Returns (score, parsed).
+/// Scores one reply against a ground truth (the record's `answer`, `ground_truth` or
+/// `ground_truth_order` value, as `json.loads` reads it). Returns (score, parsed).
 #[pyfunction]
-#[pyo3(signature = (task_id, ground_truth_json, prediction, strict_order = false))]
+#[pyo3(signature = (task_id, ground_truth, prediction, strict_order = false))]
 fn openloop_score_answer(
     py: Python<'_>,
     task_id: &str,
-    ground_truth_json: &str,
+    ground_truth: &Bound<'_, PyAny>,
     prediction: &str,
     strict_order: bool,
 ) -> PyResult<(f64, bool)> {
     let task = task_of(py, task_id)?;
-    let gt: serde_json::Value = serde_json::from_str(ground_truth_json)
-        .map_err(|e| config_error(py, format!("ground truth: invalid JSON: {e}")))?;
+    let gt = json_value(py, "ground truth", ground_truth)?;
     dh_benchmark::score_answer(task.scorer(), &PyValue::from_json(&gt), prediction, &options(strict_order))
         .map(|s| (s.score, s.parsed))
         .ok_or_else(|| config_error(py, format!("{task} is scored by the judge, not by rules")))
 }
 
-/// Scores a batch of one task: records as JSON texts, replies as strings.
-/// Returns (scores, parsed). R1_4 (judge-scored) is refused.
+/// Scores a batch of one task: records as dicts (as `json.loads` reads them), replies as
+/// strings. Returns (scores, parsed). R1_4 (judge-scored) is refused.
 #[pyfunction]
-#[pyo3(signature = (task_id, records_json, predictions, strict_order = false))]
+#[pyo3(signature = (task_id, records, predictions, strict_order = false))]
 fn openloop_score_task(
     py: Python<'_>,
     task_id: &str,
-    records_json: Vec<String>,
+    records: Vec<Bound<'_, PyAny>>,
     predictions: Vec<String>,
     strict_order: bool,
 ) -> PyResult<(Vec<f64>, Vec<bool>)> {
     let task = task_of(py, task_id)?;
-    if records_json.len() != predictions.len() {
+    if records.len() != predictions.len() {
         return Err(config_error(
             py,
-            format!("{} records but {} predictions", records_json.len(), predictions.len()),
+            format!("{} records but {} predictions", records.len(), predictions.len()),
         ));
     }
+    let records = records
+        .iter()
+        .enumerate()
+        .map(|(i, r)| json_value(py, &format!("records[{i}]"), r))
+        .collect::<PyResult<Vec<_>>>()?;
     let opts = options(strict_order);
     let res: Result<(Vec<f64>, Vec<bool>), String> = py.detach(|| {
-        let mut scores = Vec::with_capacity(records_json.len());
-        let mut parsed = Vec::with_capacity(records_json.len());
-        for (i, (r, p)) in records_json.iter().zip(&predictions).enumerate() {
-            let ctx = format!("records_json[{i}]");
-            let v: serde_json::Value =
-                serde_json::from_str(r).map_err(|e| format!("{ctx}: invalid JSON: {e}"))?;
-            match dh_benchmark::score_record(task, &v, p, &opts, &ctx) {
+        let mut scores = Vec::with_capacity(records.len());
+        let mut parsed = Vec::with_capacity(records.len());
+        for (i, (v, p)) in records.iter().zip(&predictions).enumerate() {
+            let ctx = format!("records[{i}]");
+            match dh_benchmark::score_record(task, v, p, &opts, &ctx) {
                 Ok(Some(s)) => {
                     scores.push(s.score);
                     parsed.push(s.parsed);
@@ -196,7 +203,7 @@ fn weights_of(py: Python<'_>, w: Option<BTreeMap<String, f64>>) -> PyResult<BTre
 }
 
 /// Aggregates task outcomes `[(task_id, source_file, scores, parse_fail, pass_rate|None)]`
-/// with `weights` (frozen weights when None). Returns the summary as JSON text.
+/// with `weights` (frozen weights when None). Returns the summary (final_score.json's content).
 #[pyfunction]
 #[pyo3(signature = (outcomes, weights = None))]
 #[allow(clippy::type_complexity)]
@@ -204,7 +211,7 @@ fn openloop_summarize(
     py: Python<'_>,
     outcomes: Vec<(String, String, Vec<f64>, usize, Option<f64>)>,
     weights: Option<BTreeMap<String, f64>>,
-) -> PyResult<String> {
+) -> PyResult<Bound<'_, PyAny>> {
     let weights = weights_of(py, weights)?;
     let outcomes = outcomes
         .into_iter()
@@ -213,7 +220,8 @@ fn openloop_summarize(
         })
         .collect::<PyResult<Vec<_>>>()?;
     let summary = aggregate::summarize(&outcomes, &weights);
-    serde_json::to_string(&summary).map_err(|e| config_error(py, format!("summary: {e}")))
+    let v = serde_json::to_value(&summary).map_err(|e| config_error(py, format!("summary: {e}")))?;
+    Ok(pythonize(py, &v)?)
 }
 
 /// The scorers' constants (the original's `config` block of `final_score.json`).

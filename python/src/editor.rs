@@ -3,11 +3,11 @@
 //! being edited. The page never re-implements any of it.
 
 use crate::env::{err, map_cache};
+use crate::json::to_py;
 use dh_env::geom::{Pose, Vec2};
 use dh_env::map::{EdgeFunction, Network};
 use dh_env::scenario::{
-    parse_scenario_str, resolve_map_path, ActorMotion, LightProgram, LoadOptions, ResolvedScenario, Summary,
-    Trigger,
+    resolve_map_path, ActorMotion, LightProgram, LoadOptions, ResolvedScenario, Scenario, Summary, Trigger,
 };
 use pyo3::prelude::*;
 use serde_json::{json, Value};
@@ -40,11 +40,15 @@ fn load_map(py: Python<'_>, map: &str, sumo_home: Option<&Path>) -> PyResult<(Pa
     Ok((path, net))
 }
 
-/// A network's drawable geometry as JSON: lanes with their centre-line shapes, junction
+/// A network's drawable geometry: lanes with their centre-line shapes, junction
 /// outlines, signal heads at their stop lines, and each light's program.
 #[pyfunction]
 #[pyo3(signature = (map, sumo_home=None))]
-pub fn map_geometry(py: Python<'_>, map: &str, sumo_home: Option<PathBuf>) -> PyResult<String> {
+pub fn map_geometry<'py>(
+    py: Python<'py>,
+    map: &str,
+    sumo_home: Option<PathBuf>,
+) -> PyResult<Bound<'py, PyAny>> {
     let (path, net) = load_map(py, map, sumo_home.as_deref())?;
     let lanes: Vec<Value> = net
         .lanes
@@ -97,7 +101,7 @@ pub fn map_geometry(py: Python<'_>, map: &str, sumo_home: Option<PathBuf>) -> Py
         "bounds": [b.min.x, b.min.y, b.max.x, b.max.y],
         "lanes": lanes, "junctions": junctions, "signal_heads": heads, "programs": programs,
     });
-    Ok(out.to_string())
+    to_py(py, &out)
 }
 
 /// The lane nearest to a world point, as a scenario place: `(lane id, s, distance)`, or `None`
@@ -253,29 +257,21 @@ fn scenario_json(s: &ResolvedScenario) -> Value {
 }
 
 /// Validates scenario text as if it were the file at `path` (relative map paths and error
-/// messages refer to `path`, which need not exist) and returns its resolved geometry as JSON:
+/// messages refer to `path`, which need not exist) and returns its resolved geometry:
 /// the `validate` summary, the ego's start, destination and route, every actor's path and
 /// trigger, and every light's program with its phases over the episode's timeout. Errors are
 /// raised as `scenario validate` prints them.
 #[pyfunction]
 #[pyo3(signature = (path, text, sumo_home=None))]
-pub fn scenario_geometry(
-    py: Python<'_>,
+pub fn scenario_geometry<'py>(
+    py: Python<'py>,
     path: &str,
     text: &str,
     sumo_home: Option<PathBuf>,
-) -> PyResult<String> {
+) -> PyResult<Bound<'py, PyAny>> {
     let opts = LoadOptions { sumo_home, cache: Some(map_cache()) };
-    let s = py.detach(|| resolve_text(Path::new(path), text, &opts)).map_err(|e| err(py, e))?;
-    Ok(scenario_json(&s).to_string())
-}
-
-/// Parses and resolves scenario text standing for the file at `path` (what `Scenario::load_with`
-/// does after reading the file).
-pub(crate) fn resolve_text(path: &Path, text: &str, opts: &LoadOptions) -> dh_env::Result<ResolvedScenario> {
-    let spec = parse_scenario_str(path, text)?;
-    dh_env::scenario::resolve::resolve(path, &spec, opts)
-        .map_err(|e| dh_env::scenario::parse::locate(e, path, text))
+    let s = py.detach(|| Scenario::load_str(path, text, &opts)).map_err(|e| err(py, e))?;
+    to_py(py, &scenario_json(&s))
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -2,12 +2,12 @@
 //! the GIL is released while the world ticks and renders; images leave as owned numpy arrays.
 
 use crate::errors::to_pyerr;
-use crate::json::to_py;
+use crate::json::{from_py, to_py};
 use crate::sumo_native::PySumoSession;
 use dh_agents::expert::{Expert, ExpertParams};
 use dh_env::drive::{ActuationBridge, Control, Decision, DecisionFailure};
 use dh_env::render::{BevConfig, CameraConfig, GifWriter, Image};
-use dh_env::scenario::{LoadOptions, MapCache};
+use dh_env::scenario::{LoadOptions, MapCache, Scenario};
 use dh_env::sim::{Action, ActionMode, FrameSnapshot, Observation, Sim, SimConfig, StepInfo};
 use numpy::ndarray::Array3;
 use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1};
@@ -37,23 +37,25 @@ pub struct PySim {
 #[pymethods]
 impl PySim {
     #[new]
-    /// `text`: the scenario's TOML standing for the file at `scenario` (an editor's unsaved
-    /// buffer; relative paths and error messages still refer to `scenario`).
-    #[pyo3(signature = (scenario, config_json, sumo_home=None, text=None))]
+    /// `config`: the core's settings (`R4Config.to_core()`, a dict). `text`: the scenario's TOML
+    /// standing for the file at `scenario` (an editor's unsaved buffer; relative paths and error
+    /// messages still refer to `scenario`).
+    #[pyo3(signature = (scenario, config, sumo_home=None, text=None))]
     fn new(
         py: Python<'_>,
         scenario: &str,
-        config_json: &str,
+        config: &Bound<'_, PyAny>,
         sumo_home: Option<PathBuf>,
         text: Option<&str>,
     ) -> PyResult<Self> {
-        let config = SimConfig::from_json(config_json).map_err(|e| err(py, e))?;
+        let config: SimConfig = from_py("config", config).map_err(|e| err(py, e))?;
+        config.validate().map_err(|e| err(py, e))?;
         let load = LoadOptions { sumo_home, cache: Some(map_cache()) };
         let path = Path::new(scenario).to_path_buf();
         let inner = py
             .detach(|| match text {
                 None => Sim::new(&path, config, &load),
-                Some(t) => Sim::from_scenario(crate::editor::resolve_text(&path, t, &load)?, config),
+                Some(t) => Sim::from_scenario(Scenario::load_str(&path, t, &load)?, config),
             })
             .map_err(|e| err(py, e))?;
         let expert = Expert::new(ExpertParams::default()).map_err(|e| err(py, e))?;
@@ -117,8 +119,7 @@ impl PySim {
     /// Every decision of the running episode: decision, tick, raw, parsed, failure, control.
     fn decision_log<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         let log = self.inner.decision_log().map_err(|e| err(py, e))?;
-        let v = serde_json::to_value(log).map_err(|e| err(py, dh_env::Error::Simulation(e.to_string())))?;
-        to_py(py, &v)
+        to_py(py, log)
     }
 
     /// One decision: `(observation, reward, terminated, truncated, info)`.
@@ -195,16 +196,16 @@ impl PySim {
         image_to_py(py, img)
     }
 
-    /// Renders any camera (full `CameraConfig` as JSON) at the current state.
-    fn render_camera<'py>(&self, py: Python<'py>, config_json: &str) -> PyResult<Bound<'py, PyAny>> {
+    /// Renders any camera (a full `CameraConfig`, dataclass or dict) at the current state.
+    fn render_camera<'py>(&self, py: Python<'py>, config: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
         let inner = &self.inner;
-        render_json(py, "camera", config_json, |cam: &CameraConfig, img| inner.render_camera(cam, img))
+        render_with(py, "camera", config, |cam: &CameraConfig, img| inner.render_camera(cam, img))
     }
 
-    /// Renders a BEV (full `BevConfig` as JSON) at the current state.
-    fn render_bev<'py>(&self, py: Python<'py>, config_json: &str) -> PyResult<Bound<'py, PyAny>> {
+    /// Renders a BEV (a full `BevConfig`, dataclass or dict) at the current state.
+    fn render_bev<'py>(&self, py: Python<'py>, config: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
         let inner = &self.inner;
-        render_json(py, "bev", config_json, |bev: &BevConfig, img| inner.render_bev(bev, img))
+        render_with(py, "bev", config, |bev: &BevConfig, img| inner.render_bev(bev, img))
     }
 
     /// What the renderers draw of the current state, to render later (`Frame`).
@@ -227,8 +228,12 @@ impl PySim {
     }
 
     /// Actors visible to a camera: id, bbox_px, center_px, distance_m, visible_fraction, pixel_count.
-    fn project_actors<'py>(&self, py: Python<'py>, config_json: &str) -> PyResult<Bound<'py, PyList>> {
-        let cam: CameraConfig = parse_json(py, "camera", config_json)?;
+    fn project_actors<'py>(
+        &self,
+        py: Python<'py>,
+        config: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyList>> {
+        let cam: CameraConfig = from_py("camera", config).map_err(|e| err(py, e))?;
         cam.validate().map_err(|e| err(py, e))?;
         let inner = &self.inner;
         let found = py.detach(|| inner.project_actors(&cam)).map_err(|e| err(py, e))?;
@@ -239,9 +244,9 @@ impl PySim {
     fn render_and_project<'py>(
         &self,
         py: Python<'py>,
-        config_json: &str,
+        config: &Bound<'py, PyAny>,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyList>)> {
-        let cam: CameraConfig = parse_json(py, "camera", config_json)?;
+        let cam: CameraConfig = from_py("camera", config).map_err(|e| err(py, e))?;
         cam.validate().map_err(|e| err(py, e))?;
         let mut img = Image::default();
         let inner = &self.inner;
@@ -252,8 +257,7 @@ impl PySim {
     /// The scene score record so far (final once terminated), as a dict.
     fn score<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         let rec = self.inner.score_record().map_err(|e| err(py, e))?;
-        let v = serde_json::to_value(&rec).map_err(|e| err(py, dh_env::Error::Simulation(e.to_string())))?;
-        to_py(py, &v)
+        to_py(py, &rec)
     }
 
     /// The run log (JSONL) that `rescore` reads.
@@ -423,10 +427,6 @@ fn projected_to_py<'py>(
     Ok(out)
 }
 
-fn parse_json<T: serde::de::DeserializeOwned>(py: Python<'_>, field: &str, text: &str) -> PyResult<T> {
-    dh_env::sim::json_config(field, text).map_err(|e| err(py, e))
-}
-
 /// Animated GIF of RGB frames (H×W×3 uint8), e.g. an episode's front camera.
 /// One moment of an episode as the renderers see it (`Sim.frame_snapshot`): renders equal to
 /// the `Sim`'s at that moment, whatever the world did since.
@@ -437,14 +437,14 @@ pub struct PyFrame {
 
 #[pymethods]
 impl PyFrame {
-    fn render_camera<'py>(&self, py: Python<'py>, config_json: &str) -> PyResult<Bound<'py, PyAny>> {
+    fn render_camera<'py>(&self, py: Python<'py>, config: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
         let inner = &self.inner;
-        render_json(py, "camera", config_json, |cam: &CameraConfig, img| inner.render_camera(cam, img))
+        render_with(py, "camera", config, |cam: &CameraConfig, img| inner.render_camera(cam, img))
     }
 
-    fn render_bev<'py>(&self, py: Python<'py>, config_json: &str) -> PyResult<Bound<'py, PyAny>> {
+    fn render_bev<'py>(&self, py: Python<'py>, config: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
         let inner = &self.inner;
-        render_json(py, "bev", config_json, |bev: &BevConfig, img| inner.render_bev(bev, img))
+        render_with(py, "bev", config, |bev: &BevConfig, img| inner.render_bev(bev, img))
     }
 }
 
@@ -492,17 +492,17 @@ impl PyGifWriter {
 
 /// Parses and validates a renderer config (`field` names it in errors), renders with the GIL
 /// released and returns the frame as a numpy array: `Sim`'s and `Frame`'s render methods.
-fn render_json<'py, C, F>(
+fn render_with<'py, C, F>(
     py: Python<'py>,
     field: &str,
-    config_json: &str,
+    config: &Bound<'py, PyAny>,
     render: F,
 ) -> PyResult<Bound<'py, PyAny>>
 where
     C: serde::de::DeserializeOwned + RenderConfig + Sync,
     F: FnOnce(&C, &mut Image) -> dh_env::Result<()> + Send,
 {
-    let cfg: C = parse_json(py, field, config_json)?;
+    let cfg: C = from_py(field, config).map_err(|e| err(py, e))?;
     cfg.check().map_err(|e| err(py, e))?;
     let mut img = Image::default();
     py.detach(|| render(&cfg, &mut img)).map_err(|e| err(py, e))?;
@@ -547,37 +547,41 @@ fn obs_to_py(py: Python<'_>, obs: Observation) -> PyResult<Bound<'_, PyDict>> {
 }
 
 fn info_to_py<'py>(py: Python<'py>, info: &StepInfo) -> PyResult<Bound<'py, PyAny>> {
-    let v = serde_json::to_value(info).map_err(|e| err(py, dh_env::Error::Simulation(e.to_string())))?;
-    to_py(py, &v)
+    to_py(py, info)
 }
 
-/// Recomputes a scene score from a run log (JSONL text) without simulating; returns JSON.
+/// Recomputes a scene score from a run log (the JSONL text of `Sim.episode_log`) without
+/// simulating; returns the score record.
 #[pyfunction]
-pub fn rescore(py: Python<'_>, log: &str) -> PyResult<String> {
+pub fn rescore<'py>(py: Python<'py>, log: &str) -> PyResult<Bound<'py, PyAny>> {
     let run = dh_env::score::RunLog::from_jsonl(log, "episode_log").map_err(|e| err(py, e))?;
     let rec = run.rescore().map_err(|e| err(py, e))?;
-    serde_json::to_string(&rec).map_err(|e| err(py, dh_env::Error::Simulation(e.to_string())))
+    to_py(py, &rec)
 }
 
-/// Validates a scenario file; returns its summary as JSON.
+/// Validates a scenario file; returns its summary.
 #[pyfunction]
 #[pyo3(signature = (path, sumo_home=None))]
-pub fn validate_scenario(py: Python<'_>, path: &str, sumo_home: Option<PathBuf>) -> PyResult<String> {
+pub fn validate_scenario<'py>(
+    py: Python<'py>,
+    path: &str,
+    sumo_home: Option<PathBuf>,
+) -> PyResult<Bound<'py, PyAny>> {
     let opts = LoadOptions { sumo_home, cache: Some(map_cache()) };
     let s = py.detach(|| dh_env::scenario::validate_with(path, &opts)).map_err(|e| err(py, e))?;
-    serde_json::to_string(&s).map_err(|e| err(py, dh_env::Error::Simulation(e.to_string())))
+    to_py(py, &s)
 }
 
-/// The JSON Schema of scenario files (generated from the Rust types), pretty-printed.
+/// The JSON Schema of scenario files (generated from the Rust types).
 #[pyfunction]
-pub fn scenario_json_schema() -> String {
-    dh_env::scenario::scenario_json_schema_string()
+pub fn scenario_json_schema(py: Python<'_>) -> PyResult<Bound<'_, PyAny>> {
+    to_py(py, &dh_env::scenario::scenario_json_schema())
 }
 
-/// The default configs as JSON (what `R4Config` mirrors).
+/// The core's default settings (what `R4Config` mirrors).
 #[pyfunction]
-pub fn default_sim_config() -> String {
-    serde_json::to_string(&SimConfig::default()).unwrap_or_default()
+pub fn default_sim_config(py: Python<'_>) -> PyResult<Bound<'_, PyAny>> {
+    to_py(py, &SimConfig::default())
 }
 
 /// Registers the folder of the package's shipped maps for `map = "builtin:NAME"` (called once
@@ -587,11 +591,15 @@ pub fn set_builtin_maps_dir(path: PathBuf) -> bool {
     dh_env::scenario::set_builtin_maps_dir(path)
 }
 
-/// The edges and lanes of a road network as JSON: `map` is what a scenario's `map` key takes (a
+/// The edges and lanes of a road network: `map` is what a scenario's `map` key takes (a
 /// path, `sumo:PATH` or `builtin:NAME`).
 #[pyfunction]
 #[pyo3(signature = (map, sumo_home=None))]
-pub fn map_summary(py: Python<'_>, map: &str, sumo_home: Option<PathBuf>) -> PyResult<String> {
+pub fn map_summary<'py>(
+    py: Python<'py>,
+    map: &str,
+    sumo_home: Option<PathBuf>,
+) -> PyResult<Bound<'py, PyAny>> {
     use dh_env::map::{EdgeFunction, Network};
     let here = std::path::Path::new("<command line>");
     let path = dh_env::scenario::resolve_map_path(here, map, sumo_home.as_deref()).map_err(|e| err(py, e))?;
@@ -635,7 +643,7 @@ pub fn map_summary(py: Python<'_>, map: &str, sumo_home: Option<PathBuf>) -> PyR
         "vclasses": dh_env::map::VClassSet::ALL.sumo_names(),
         "edges": edges,
     });
-    Ok(out.to_string())
+    to_py(py, &out)
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

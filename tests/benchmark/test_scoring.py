@@ -60,7 +60,7 @@ def _rid(rec: dict[str, Any]) -> str:
 def test_official_samples_perfect_answers_score_100(tmp_path: Path, openloop_data_dir: Path) -> None:
     recs = _official_records(openloop_data_dir)
     for tid, rs in recs.items():
-        assert _core.openloop_task_from_record(json.dumps(rs[0])) == tid
+        assert _core.openloop_task_from_record(rs[0]) == tid
         _write(tmp_path, tid, [_line(tid, _rid(r), _perfect(tid, r), r) for r in rs])
     result = score_run(tmp_path)
     saved = json.loads((tmp_path / "evaluation" / "final_score.json").read_text(encoding="utf-8"))
@@ -104,13 +104,13 @@ def test_official_samples_full_option_text_and_wrong_answers(tmp_path: Path, ope
             letter = r["answer"][0]
             text = r["answer"][2:].strip()
             wrong = next(o[0] for o in r["options"] if o[0] != letter)
-            assert _core.openloop_score_answer(tid, json.dumps(r["answer"]), letter) == (100.0, True)
-            assert _core.openloop_score_answer(tid, json.dumps(r["answer"]), text) == (100.0, True)
-            assert _core.openloop_score_answer(tid, json.dumps(r["answer"]), wrong) == (0.0, True)
+            assert _core.openloop_score_answer(tid, r["answer"], letter) == (100.0, True)
+            assert _core.openloop_score_answer(tid, r["answer"], text) == (100.0, True)
+            assert _core.openloop_score_answer(tid, r["answer"], wrong) == (0.0, True)
     # R1_2_A: distances with units; half the distance → exp(-|ln((g/2+0.1)/(g+0.1))|).
     r = recs["R1_2_A"][0]
     g = float(r["answer"].split()[0])
-    s, ok = _core.openloop_score_answer("R1_2_A", json.dumps(r["answer"]), f"{g / 2} meters")
+    s, ok = _core.openloop_score_answer("R1_2_A", r["answer"], f"{g / 2} meters")
     assert ok and s == pytest.approx(100 * math.exp(-abs(math.log((g / 2 + 0.1) / (g + 0.1)))))
 
 
@@ -158,13 +158,13 @@ def test_r3_2_quirk_default_and_strict(tmp_path: Path) -> None:
 
 
 def test_batch_scoring_contract_and_errors(tmp_path: Path) -> None:
-    recs = [json.dumps({"task_id": "R1_3_0", "ground_truth": {"bbox": [0, 0, 10, 10], "format": "xyxy"}})] * 3
+    recs = [{"task_id": "R1_3_0", "ground_truth": {"bbox": [0, 0, 10, 10], "format": "xyxy"}}] * 3
     scores, parsed = _core.openloop_score_task("R1_3", recs, ["[0,0,10,10]", '"[[5, 0, 15, 10]]"', "none"])
     assert scores == [100.0, pytest.approx(100 / 3), 0.0] and parsed == [True, True, False]
     with pytest.raises(ConfigError, match="judge"):
-        _core.openloop_score_task("R1_4", ['{"answer": "x"}'], ["y"])
+        _core.openloop_score_task("R1_4", [{"answer": "x"}], ["y"])
     with pytest.raises(ConfigError, match="ground_truth"):
-        _core.openloop_score_task("R1_3", ['{"task_id": "x"}'], ["[1,2,3,4]"])
+        _core.openloop_score_task("R1_3", [{"task_id": "x"}], ["[1,2,3,4]"])
     with pytest.raises(ConfigError, match="unknown open-loop task"):
         _core.openloop_score_task("R9", [], [])
     with pytest.raises(ConfigError, match="nowhere: no such folder"):

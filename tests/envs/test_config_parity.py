@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 from typing import Any
 
 import pytest
@@ -26,7 +25,7 @@ def _flatten(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
     return out
 
 
-RUST = _flatten(json.loads(_core.default_sim_config()))
+RUST = _flatten(_core.default_sim_config())
 
 
 def _python_defaults() -> dict[str, Any]:
@@ -50,4 +49,4 @@ def test_python_default_equals_rust_default(key: str) -> None:
 
 
 def test_default_config_json_is_the_rust_default() -> None:
-    assert json.loads(R4Config().to_json()) == json.loads(_core.default_sim_config())
+    assert R4Config().to_core() == _core.default_sim_config()

@@ -199,7 +199,7 @@ def test_same_seed_and_actions_give_identical_trajectories_and_frames() -> None:
 def test_rescore_from_the_log_reproduces_the_live_score() -> None:
     env = make("07_sudden_brake/town01_07_lead_brakes", **NO_IMAGES)
     live = run_episode(env, ExpertAgent(), seed=1).score
-    again = json.loads(_core.rescore(env.sim.episode_log()))
+    again = _core.rescore(env.sim.episode_log())
     for key in ("score_route", "score_safety", "score_efficiency", "score_composed", "termination_reason"):
         assert again[key] == live[key]
     assert again["events"] == live["events"]

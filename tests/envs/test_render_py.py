@@ -24,12 +24,12 @@ LEAD_BRAKES = "07_sudden_brake/town01_07_lead_brakes"
 TOWN01 = builtin_root() / "maps" / "town01" / "town01.net.xml"
 
 
-def cam_json(**kw: Any) -> str:
-    return json.dumps(dataclasses.asdict(CameraConfig(**kw)))
+def cam_json(**kw: Any) -> CameraConfig:
+    return CameraConfig(**kw)
 
 
-def bev_json(**kw: Any) -> str:
-    return json.dumps(dataclasses.asdict(BevConfig(**kw)))
+def bev_json(**kw: Any) -> BevConfig:
+    return BevConfig(**kw)
 
 
 def state(obs: dict[str, Any]) -> dict[str, float]:
@@ -293,7 +293,7 @@ def test_bad_camera_config_raises_config_error_naming_the_field(change: dict[str
             cfg[k] = v
     for call in (env.unwrapped.sim.render_camera, env.unwrapped.sim.project_actors):
         with pytest.raises(drivehierarchy.ConfigError) as info:
-            call(json.dumps(cfg))
+            call(cfg)
         assert named in str(info.value)
         assert isinstance(info.value, ValueError)
     env.close()
@@ -308,14 +308,14 @@ def test_bad_bev_config_and_json_raise_config_error() -> None:
     with pytest.raises(drivehierarchy.ConfigError, match=r"bev\.px_per_m"):
         sim.render_bev(bev_json(px_per_m=-1.0))
     with pytest.raises(drivehierarchy.ConfigError, match="camera"):
-        sim.render_camera("{not json")
+        sim.render_camera("front")  # type: ignore[arg-type]
     with pytest.raises(drivehierarchy.ConfigError, match=r"render\.kind"):
         sim.render("side")
     env.close()
 
 
 def test_rendering_before_reset_is_an_error_not_a_crash() -> None:
-    config = R4Config(front=None, bev=None).to_json()
+    config = R4Config(front=None, bev=None).to_core()
     sim = _core.Sim(resolve_scenario(LEAD_BRAKES), config)
     with pytest.raises(drivehierarchy.DriveHierarchyError):
         sim.render_camera(cam_json())
@@ -360,3 +360,18 @@ def test_runner_video_writes_one_gif_frame_per_decision(tmp_path: Path) -> None:
     with Image.open(gif) as im:
         assert im.size == (400, 225)
         assert im.n_frames == results[0]["steps"]
+
+
+def test_settings_go_in_as_dataclasses_or_dicts_and_errors_name_field_and_value() -> None:
+    env = no_image_env(LEAD_BRAKES)
+    env.reset(seed=0)
+    sim = env.unwrapped.sim
+    cam = CameraConfig(width=160, height=90)
+    assert np.array_equal(sim.render_camera(cam), sim.render_camera(dataclasses.asdict(cam)))
+    with pytest.raises(drivehierarchy.ConfigError, match=r"`camera\.width` = -3: "):
+        sim.render_camera({**dataclasses.asdict(cam), "width": -3})
+    core = R4Config(front=None, bev=None).to_core()
+    front = {**dataclasses.asdict(CameraConfig()), "fov_deg": "wide"}
+    with pytest.raises(drivehierarchy.ConfigError, match=r"`config\.front\.fov_deg` = 'wide': "):
+        _core.Sim(resolve_scenario(LEAD_BRAKES), {**core, "front": front})
+    env.close()

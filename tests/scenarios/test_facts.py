@@ -67,7 +67,7 @@ def _strings(schema: Any) -> list[str]:
 
 @pytest.fixture(scope="module")
 def schema() -> dict[str, Any]:
-    s: dict[str, Any] = json.loads(_core.scenario_json_schema())
+    s: dict[str, Any] = _core.scenario_json_schema()
     return s
 
 
@@ -142,7 +142,7 @@ def test_the_actor_form_has_a_field_for_every_actor_key() -> None:
 def test_the_editor_serves_the_facts(client: Any) -> None:
     d = client.get("/api/facts").json()
     assert d["constants"] == json.loads(json.dumps(FACTS))
-    assert d["schema"] == json.loads(_core.scenario_json_schema())
+    assert d["schema"] == _core.scenario_json_schema()
 
 
 @pytest.fixture

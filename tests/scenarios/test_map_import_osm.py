@@ -58,7 +58,7 @@ def test_import_osm_builds_a_net_our_reader_routes_on(
         f'[ego]\nroute_edges = ["{r["from"]}", "{r["to"]}"]\n',
         encoding="utf-8",
     )
-    summary = json.loads(_core.validate_scenario(str(scen), None))
+    summary = _core.validate_scenario(str(scen), None)
     assert summary["route_length_m"] == pytest.approx(r["our_length_m"], abs=0.01)
 
 

@@ -107,7 +107,7 @@ def test_town02_routes_load_in_our_reader(
         f"[ego]\n{start}route_edges = {json.dumps(edges)}\n",
         encoding="utf-8",
     )
-    summary = json.loads(_core.validate_scenario(str(scen), None))
+    summary = _core.validate_scenario(str(scen), None)
     route = summary["route_edges"]
     assert route[0] == edges[0] and route[-1] == edges[-1]
     assert all(e in route for e in edges), route

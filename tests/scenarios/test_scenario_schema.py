@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import copy
-import json
 import re
 import tomllib
 from pathlib import Path
@@ -14,6 +13,7 @@ import pytest
 
 from drivehierarchy import ScenarioError, _core
 from drivehierarchy.cli import main
+from drivehierarchy.scenario_cli import schema_text
 from drivehierarchy.scenarios import builtin_root
 
 REPO = Path(__file__).resolve().parents[2]
@@ -51,7 +51,7 @@ speed_mps = 9.0
 
 @pytest.fixture(scope="module")
 def schema() -> dict[str, Any]:
-    s: dict[str, Any] = json.loads(_core.scenario_json_schema())
+    s: dict[str, Any] = _core.scenario_json_schema()
     jsonschema.Draft7Validator.check_schema(s)
     return s
 
@@ -64,16 +64,16 @@ def errors(schema: dict[str, Any], doc: dict[str, Any]) -> list[str]:
 def test_committed_schema_is_current(schema: dict[str, Any]) -> None:
     """docs/scenario.schema.json is exactly what the Rust types generate (regenerate with
     `drivehierarchy scenario schema --out docs/scenario.schema.json`)."""
-    assert SCHEMA_FILE.read_text(encoding="utf-8") == _core.scenario_json_schema()
+    assert SCHEMA_FILE.read_text(encoding="utf-8") == schema_text()
     assert schema["$schema"] == "http://json-schema.org/draft-07/schema#"
 
 
 def test_cli_prints_and_writes_it(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["scenario", "schema"]) == 0
-    assert capsys.readouterr().out == _core.scenario_json_schema()
+    assert capsys.readouterr().out == schema_text()
     out = tmp_path / "s.json"
     assert main(["scenario", "schema", "--out", str(out)]) == 0
-    assert out.read_text(encoding="utf-8") == _core.scenario_json_schema()
+    assert out.read_text(encoding="utf-8") == schema_text()
     assert main(["scenario", "schema", "--out", str(tmp_path / "no" / "such" / "s.json")]) == 2
 
 

@@ -7,7 +7,6 @@ flags a negative speed), and the schema may refuse only what the validator refus
 
 from __future__ import annotations
 
-import json
 import re
 import tomllib
 from pathlib import Path
@@ -53,7 +52,7 @@ OCCURRENCES = _occurrences()
 
 @pytest.fixture(scope="module")
 def validator() -> jsonschema.Draft7Validator:
-    return jsonschema.Draft7Validator(json.loads(_core.scenario_json_schema()))
+    return jsonschema.Draft7Validator(_core.scenario_json_schema())
 
 
 def _edited(path: Path, line: int, a: int, b: int, value: str, tmp_path: Path) -> Path:

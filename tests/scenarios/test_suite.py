@@ -7,7 +7,6 @@ all 100 scenarios (state-only, in worker processes) and checks the must-holds, t
 
 from __future__ import annotations
 
-import json
 import tomllib
 from collections import Counter
 from pathlib import Path
@@ -20,7 +19,7 @@ from drivehierarchy.scenarios import builtin_root, sumo_home
 SUITE = builtin_root() / "r4"
 DOC = Path(__file__).resolve().parents[2] / "docs" / "suite.md"
 # The protocol's ten categories, as the Rust scenario reader defines them (its schema's enum).
-CATEGORIES = sorted(json.loads(_core.scenario_json_schema())["properties"]["category"]["enum"])
+CATEGORIES = sorted(_core.scenario_json_schema()["properties"]["category"]["enum"])
 # Real-world city networks shipped inside eclipse-sumo (OpenStreetMap / survey based). The
 # synthetic ones there (grid6, square, ...) do not count.
 REAL_WORLD_SUMO = {

@@ -49,9 +49,16 @@ impl Scenario {
     pub fn load_with(path: impl AsRef<Path>, opts: &LoadOptions) -> Result<ResolvedScenario> {
         let path = path.as_ref();
         let text = parse::read_scenario_text(path)?;
-        let spec = parse_scenario_str(path, &text)?;
+        Self::load_str(path, &text, opts)
+    }
+
+    /// Parses and resolves scenario `text` standing for the file at `path` (an editor's unsaved
+    /// buffer): relative map paths and error messages refer to `path`, which need not exist.
+    pub fn load_str(path: impl AsRef<Path>, text: &str, opts: &LoadOptions) -> Result<ResolvedScenario> {
+        let path = path.as_ref();
+        let spec = parse_scenario_str(path, text)?;
         // Resolution errors name a TOML path; add where it is written in the file.
-        resolve::resolve(path, &spec, opts).map_err(|e| parse::locate(e, path, &text))
+        resolve::resolve(path, &spec, opts).map_err(|e| parse::locate(e, path, text))
     }
 }
 

@@ -54,7 +54,8 @@ def run_episode(
             on_step(steps, obs, reward, info)
         if terminated or truncated or (max_steps is not None and steps >= max_steps):
             break
-    return EpisodeResult(score=env.unwrapped.score(), steps=steps, total_reward=total)
+    score: dict[str, Any] = env.unwrapped.score()  # type: ignore[attr-defined]  # an R4 env's
+    return EpisodeResult(score=score, steps=steps, total_reward=total)
 
 
 class ConstantAgent:

@@ -16,7 +16,7 @@ from drivehierarchy._core import ConfigError
 from drivehierarchy.envs.traffic.modes import TRAFFIC_MODES, traffic_mode_arg
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     bl = sub.add_parser("baselines", help="RL and imitation baselines (needs the `rl` extra)")
     cmds = bl.add_subparsers(dest="baselines_command", required=True)
 

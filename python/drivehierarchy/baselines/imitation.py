@@ -43,9 +43,9 @@ class ExpertLabels(gym.Wrapper[Any, Any, Any, Any]):
 
     def _info(self, info: dict[str, Any], terminated: bool) -> dict[str, Any]:
         label = (
-            np.zeros(self.env.action_space.shape, np.float32)
+            np.zeros(self.env.action_space.shape, np.float32)  # type: ignore[type-var]
             if terminated
-            else np.asarray(self.env.unwrapped.expert_action(), np.float32)
+            else np.asarray(self.env.unwrapped.expert_action(), np.float32)  # type: ignore[attr-defined]
         )
         return {
             "expert_action": label,
@@ -59,8 +59,8 @@ class ExpertLabels(gym.Wrapper[Any, Any, Any, Any]):
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
         if terminated or truncated:
-            self.last_score = self.env.unwrapped.score()
-        return obs, reward, terminated, truncated, self._info(info, terminated or truncated)
+            self.last_score = self.env.unwrapped.score()  # type: ignore[attr-defined]
+        return obs, float(reward), terminated, truncated, self._info(info, terminated or truncated)
 
 
 def _minari_root(out: Path) -> None:
@@ -106,7 +106,7 @@ def collect(
             a = np.asarray(info["expert_action"], np.float32)
             if noisy:
                 a = a + rng.normal(0.0, noise, 2).astype(np.float32) * scale
-                a = np.clip(a, base.action_space.low, base.action_space.high)
+                a = np.clip(a, base.action_space.low, base.action_space.high)  # type: ignore[attr-defined]
             _obs, _, terminated, truncated, info = env.step(a)
             if terminated or truncated:
                 break

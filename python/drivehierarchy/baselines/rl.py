@@ -84,7 +84,7 @@ def sumo_scenarios(paths: Sequence[str], wrapper: WrapperConfig) -> list[str]:
     config = wrapper.env_config()
     out = []
     for path in paths:
-        sim = _core.Sim(path, config.to_json(), sumo_home())
+        sim = _core.Sim(path, config.to_core(), sumo_home())
         if resolve_traffic_mode(config.traffic, sim.scenario_traffic_mode) == "sumo":
             out.append(path)
     return out

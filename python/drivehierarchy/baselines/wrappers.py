@@ -265,7 +265,7 @@ class SuiteEnv(gym.Env[dict[str, Any], np.ndarray]):
     and `scenario_path` refer to the current scenario, so the expert and the runner work unchanged.
     """
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": []}  # type: ignore[misc]
 
     def __init__(
         self,
@@ -388,7 +388,7 @@ class ShapedReward(gym.Wrapper[Any, Any, Any, Any]):
         best = float(info.get("best_progress_m", self._best))
         steer = float(info.get("control", {}).get("steer", self._steer))
         shaped = (
-            w.score * reward
+            w.score * float(reward)
             + w.progress * (best - self._best) / 10.0
             - w.comfort * (steer - self._steer) ** 2
         )

@@ -187,7 +187,8 @@ def read_r4(path: Path, name: str | None = None) -> R4Run:
     model = name or summary.get("model")
     if not isinstance(model, str) or not model:
         raise ConfigError(f"{sp}: field `model` = {summary.get('model')!r}; name it as NAME={path}")
-    counts = summary.get("counts") if isinstance(summary.get("counts"), dict) else {}
+    raw_counts = summary.get("counts")
+    counts = raw_counts if isinstance(raw_counts, dict) else {}
     return R4Run(path, model, r4, {c: int(counts.get(c, 0)) for c in sorted(cats)})
 
 

@@ -179,7 +179,7 @@ class Editor:
 
     def _resolve(self, rel: str, text: str) -> dict[str, Any]:
         try:
-            geo = json.loads(_core.scenario_geometry(str(self.abs_path(rel)), text, sumo_home()))
+            geo = _core.scenario_geometry(str(self.abs_path(rel)), text, sumo_home())
         except DriveHierarchyError as exc:
             return {"ok": False, "error": files.error_fields(exc, self.root)}
         geo["summary"]["file"] = rel
@@ -207,7 +207,7 @@ class Editor:
                 current = files.apply_edits(current, [{"path": path, "delete": True}])
             except (ValueError, tomlkit.exceptions.TOMLKitError):
                 break
-            removed.append(field)
+            removed.append(str(field))
             nxt = self._resolve(rel, current)
             if nxt["ok"]:
                 break
@@ -294,7 +294,7 @@ def _caused_by(field: str, reason: str, removed: str) -> bool:
 
 @functools.lru_cache(maxsize=8)
 def _lane_widths(spec: str) -> dict[str, float]:
-    geo = json.loads(_core.map_geometry(spec, sumo_home()))
+    geo = _core.map_geometry(spec, sumo_home())
     return {lane["id"]: float(lane["width_m"]) for lane in geo["lanes"]}
 
 
@@ -426,7 +426,7 @@ def create_app(
 
     def facts(request: Request, body: bytes) -> Response:
         """The Rust facts the page builds its forms from (it keeps no copy of them)."""
-        schema = json.loads(_core.scenario_json_schema())
+        schema = _core.scenario_json_schema()
         return JSONResponse({"constants": _core.constants(), "schema": schema})
 
     def read(request: Request, body: bytes) -> Response:
@@ -446,7 +446,7 @@ def create_app(
         rel = request.query_params.get("path")
         if rel:
             spec = ed.map_spec_for(rel, spec)
-        return Response(_core.map_geometry(spec, sumo_home()), media_type="application/json")
+        return JSONResponse(_core.map_geometry(spec, sumo_home()))
 
     def snap(request: Request, body: bytes) -> Response:
         d = _json(body)

@@ -11,7 +11,7 @@ from drivehierarchy._core import ConfigError
 HOST = "127.0.0.1"
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     ed = sub.add_parser(
         "editor",
         help="the interactive scenario editor: a local web page (127.0.0.1 only)",

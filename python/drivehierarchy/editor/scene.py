@@ -13,10 +13,8 @@ deterministic, so the replay is the same episode).
 from __future__ import annotations
 
 import bisect
-import dataclasses
 import functools
 import io
-import json
 import threading
 from collections import OrderedDict
 from collections.abc import Callable
@@ -207,9 +205,9 @@ class ScenePlayer:
     def _render(self, index: int, view: str) -> np.ndarray:
         snap = self.snapshots[index]
         if view == "front":
-            return snap.render_camera(json.dumps(dataclasses.asdict(FRONT)))
+            return snap.render_camera(FRONT)
         if view == "bev":
-            return snap.render_bev(json.dumps(dataclasses.asdict(BEV)))
+            return snap.render_bev(BEV)
         raise ValueError(f"view {view!r}: expected 'front' or 'bev'")
 
     @_locked

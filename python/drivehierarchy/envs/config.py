@@ -14,7 +14,7 @@ ActionMode = Literal["decision", "raw"]
 
 # Every default the Rust core also has is read from it (`SimConfig::default()`): one definition.
 # tests/envs/test_config_parity.py checks that the dataclasses below agree with it field by field.
-_RUST_DEFAULTS: dict[str, Any] = json.loads(_core.default_sim_config())
+_RUST_DEFAULTS = _core.default_sim_config()
 
 
 def _rust_default(*keys: str) -> Any:
@@ -103,15 +103,20 @@ class R4Config:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> R4Config:
         """Builds a config from plain values, rejecting unknown keys with the key named."""
-        return _from_dict(cls, data, "")
+        config: R4Config = _from_dict(cls, data, "")
+        return config
 
-    def to_json(self) -> str:
-        """The form the Rust core reads (the scenario travels separately)."""
+    def to_core(self) -> dict[str, Any]:
+        """The settings the Rust core reads (`_core.Sim`; the scenario travels separately)."""
         d = dataclasses.asdict(self)
         d.pop("scenario")
         d.pop("traffic")  # handled by the Python env (envs/traffic), not the Rust config
         d.pop("sumo_backend")
-        return json.dumps(d)
+        return d
+
+    def to_json(self) -> str:
+        """`to_core()` as JSON text (what a run's manifest records)."""
+        return json.dumps(self.to_core())
 
     def replace(self, **changes: Any) -> R4Config:
         return dataclasses.replace(self, **changes)

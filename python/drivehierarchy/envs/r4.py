@@ -79,7 +79,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
     call raises `gymnasium.error.ClosedEnvironmentError`.
     """
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 4}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 4}  # type: ignore[misc]
 
     def __init__(
         self,
@@ -101,7 +101,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
             raise ConfigError(f"config `render_mode` = {render_mode!r}: expected one of ['rgb_array']")
         self.config = config
         self.render_mode = render_mode
-        self._sim: Any = None
+        self._sim: _core.Sim | None = None
         self._scenario_path: str | None = None
         self._sumo: _core.SumoSession | None = None
         self._closed = False
@@ -141,7 +141,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
             return
         self._live = False
         text, self._scenario_text = self._scenario_text, None  # only for the first scenario
-        self._sim = _core.Sim(path, self.config.to_json(), sumo_home(), text)
+        self._sim = _core.Sim(path, self.config.to_core(), sumo_home(), text)
         warn_deprecated_scenario_mode(path, text)
         self._scenario_path = path
         self._configure_traffic()
@@ -152,8 +152,12 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         return self._scenario_path
 
     @property
-    def sim(self) -> Any:
+    def sim(self) -> _core.Sim:
         """The Rust episode (privileged access for experts, runners and tests)."""
+        if self._sim is None:
+            raise gym.error.ClosedEnvironmentError(
+                "sim of a closed DriveHierarchy-R4 env: make a new env (gym.make) instead"
+            )
         return self._sim
 
     # -- Gymnasium API ---------------------------------------------------------------------
@@ -180,7 +184,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         # The scenario's variation follows the given seed itself: seed 0 plays the scenario as
         # written, other seeds jitter it within its `[variation]` bounds; unseeded resets vary.
         variation = int(seed) if seed is not None else world_seed
-        obs, info = self._sim.reset(world_seed, variation)
+        obs, info = self.sim.reset(world_seed, variation)
         self._last_frame = None
         self._live = True
         return self._shape_obs(obs), info
@@ -195,7 +199,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
             raise ConfigError(f"config `action` = {action!r}: expected shape {expected}, got {arr.shape}")
         if not np.all(np.isfinite(arr)):
             raise ConfigError(f"config `action` = {action!r}: contains NaN or infinity")
-        obs, reward, terminated, truncated, info = self._sim.step(arr)
+        obs, reward, terminated, truncated, info = self.sim.step(arr)
         self._last_frame = None
         return self._shape_obs(obs), float(reward), bool(terminated), bool(truncated), info
 
@@ -219,21 +223,21 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
             # A lone surrogate (what a JSON "\ud800" escape decodes to) is no Unicode text and
             # cannot cross into Rust: it becomes U+FFFD, like any undecodable byte of a reply.
             reply = reply.encode("utf-16", "surrogatepass").decode("utf-16", "replace")
-        obs, reward, terminated, truncated, info = self._sim.step_reply(reply)
+        obs, reward, terminated, truncated, info = self.sim.step_reply(reply)
         self._last_frame = None
         return self._shape_obs(obs), float(reward), bool(terminated), bool(truncated), info
 
     def decision_log(self) -> list[dict[str, Any]]:
         """Every decision of the episode: decision, tick, raw reply, parsed action, failure, control."""
         self._check_open("decision_log")
-        return self._sim.decision_log()
+        return self.sim.decision_log()
 
-    def render(self) -> np.ndarray | None:  # type: ignore[override]
+    def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array":
             return None
         self._check_live("render")
         if self._last_frame is None:
-            frame = self._sim.render("front")
+            frame = self.sim.render("front")
             # Read-only: the frame is cached until the next step, so a caller's in-place edit
             # would otherwise corrupt what the next render() call returns.
             frame.setflags(write=False)
@@ -266,6 +270,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
     # -- helpers ---------------------------------------------------------------------------
     def _shape_obs(self, raw: dict[str, Any]) -> dict[str, Any]:
         out: dict[str, Any] = {}
+        assert isinstance(self.observation_space, gym.spaces.Dict)
         for key in self.observation_space.spaces:
             out[key] = raw[key]
         return out
@@ -273,28 +278,28 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
     def expert_action(self) -> np.ndarray:
         """The privileged autopilot's action for the current state, in this env's action mode."""
         self._check_open("expert_action")
-        return np.asarray(self._sim.expert_action(), dtype=np.float32)
+        return np.asarray(self.sim.expert_action(), dtype=np.float32)
 
     def score(self) -> dict[str, Any]:
         """The scene score record so far (final once the episode has terminated)."""
         self._check_open("score")
-        return self._sim.score()
+        return self.sim.score()
 
     # -- background traffic (envs/traffic) -----------------------------------------------------
     @property
     def traffic_mode(self) -> str:
         """The background-traffic mode in effect: "sumo", "idm" or "none"."""
-        return resolve_traffic_mode(self.config.traffic, self._sim.scenario_traffic_mode)
+        return resolve_traffic_mode(self.config.traffic, self.sim.scenario_traffic_mode)
 
     def _configure_traffic(self) -> None:
         mode = self.traffic_mode
         if mode == "sumo":
             if self._sumo is None:
                 self._sumo = make_sumo_traffic(self.config.sumo_backend)
-            self._sim.set_traffic("sumo", self._sumo)
+            self.sim.set_traffic("sumo", self._sumo)
         else:
             self._close_traffic()
-            self._sim.set_traffic(mode)
+            self.sim.set_traffic(mode)
 
     def release_traffic(self) -> None:
         """Stops this env's SUMO simulation, if it runs one (the next `reset` starts a fresh one).
@@ -330,5 +335,5 @@ def _shallow(config: R4Config) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for f in dataclasses.fields(config):
         v = getattr(config, f.name)
-        out[f.name] = dataclasses.asdict(v) if dataclasses.is_dataclass(v) else v
+        out[f.name] = dataclasses.asdict(v) if dataclasses.is_dataclass(v) and not isinstance(v, type) else v
     return out

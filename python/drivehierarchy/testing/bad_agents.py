@@ -321,7 +321,7 @@ def fuzz_episode(
         env = DriveHierarchyR4Env(scenario=scenario, **overrides)
         out = drive(env, agent, seed)
         rec = out["score"]
-        rescored = json.loads(_core.rescore(env.sim.episode_log()))
+        rescored = _core.rescore(env.sim.episode_log())
         row.update(
             termination=rec["termination_reason"],
             score=float(rec["score_composed"]),

@@ -29,7 +29,7 @@ def env():
 def test_render_and_project_equals_the_separate_calls(env) -> None:
     sim = env.unwrapped.sim
     for name in ("CAM_FRONT", "CAM_BACK"):
-        cfg = json.dumps(R.camera_config(name))
+        cfg = R.camera_config(name)
         img, found = sim.render_and_project(cfg)
         assert np.array_equal(np.asarray(img), np.asarray(sim.render_camera(cfg)))
         assert json.dumps(found) == json.dumps(sim.project_actors(cfg))  # NaN-safe

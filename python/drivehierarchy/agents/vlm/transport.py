@@ -238,7 +238,11 @@ class AsyncChatTransport:
                 f"reply has no message content: {str(resp)[:200]}", status=200, attempts=attempt
             )
         usage_obj = getattr(resp, "usage", None)
-        usage = usage_obj.model_dump(exclude_none=True) if hasattr(usage_obj, "model_dump") else {}
+        usage = (
+            usage_obj.model_dump(exclude_none=True)
+            if usage_obj is not None and hasattr(usage_obj, "model_dump")
+            else {}
+        )
         return Completion(
             text=content.strip(),
             usage=usage,

@@ -166,7 +166,7 @@ def rank_means(scores: Mapping[str, float]) -> dict[str, float | None]:
     for rank in RANKS:
         tasks = [t for t in TASK_IDS if TASK_RANK[t] == rank]
         vals = [scores.get(t) for t in tasks]
-        out[rank] = None if any(v is None for v in vals) else sum(vals) / len(vals)  # type: ignore[misc, arg-type]
+        out[rank] = None if any(v is None for v in vals) else sum(vals) / len(vals)  # type: ignore[arg-type]
     return out
 
 

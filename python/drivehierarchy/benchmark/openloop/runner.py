@@ -226,7 +226,8 @@ def _check_resume(manifest_path: Path, config: RunConfig) -> dict[str, Any] | No
             f"{old.get('decoding')}; resuming it with model {config.model!r} and decoding "
             f"{asdict(config.decoding)} would mix runs. Use a new --out."
         )
-    return old
+    manifest: dict[str, Any] = old
+    return manifest
 
 
 # --- the run -------------------------------------------------------------------------------------

@@ -219,7 +219,7 @@ def score_run(
     if not judge_seen and not skip_l1_4:
         judge_info["skip_reason"] = "l1_4_result_file_missing"
 
-    summary = json.loads(_core.openloop_summarize(outcomes, dict(weights) if weights is not None else None))
+    summary = _core.openloop_summarize(outcomes, dict(weights) if weights is not None else None)
     for item in summary["per_file"]:
         n_skipped, first = skips.get(item["source_file"], (0, None))
         item["skipped_lines"] = n_skipped

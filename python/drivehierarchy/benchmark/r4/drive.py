@@ -3,7 +3,6 @@ record, events, logs, the results line)."""
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import time
 from pathlib import Path
@@ -16,7 +15,7 @@ from drivehierarchy.benchmark.r4.store import fresh_scene_dir, write_json_atomic
 from drivehierarchy.envs.config import CameraConfig
 
 # `--video`: the protocol's front camera at half size, one frame per decision (4 Hz).
-VIDEO_CAMERA_JSON = json.dumps(dataclasses.asdict(CameraConfig(width=400, height=225)))
+VIDEO_CAMERA = CameraConfig(width=400, height=225)
 
 
 def save_frames(frames_dir: Path, step: int, obs: dict[str, Any]) -> None:
@@ -74,7 +73,7 @@ def run_scene(job: Job, opts: RunOptions, out: Path) -> dict[str, Any]:
             if opts.frames:
                 save_frames(scene_dir / "frames", step, obs)
             if gif is not None:
-                gif.push(env.sim.render_camera(VIDEO_CAMERA_JSON))
+                gif.push(env.sim.render_camera(VIDEO_CAMERA))
 
         t0 = time.perf_counter()
         result = run_episode(env, agent, seed=job.seed, on_step=on_step)

@@ -14,7 +14,6 @@ renderer, a map or a scenario changes.
 from __future__ import annotations
 
 import dataclasses
-import json
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
@@ -82,16 +81,16 @@ def render_start(scenario: Path, out: Path, *, seed: int = 0, extras: bool = Fal
         sim = env.sim
         files: dict[str, str] = {}
         front = CameraConfig(supersample=2)
-        _save_png(sim.render_camera(json.dumps(dataclasses.asdict(front))), out / f"{key}_front.png")
+        _save_png(sim.render_camera(front), out / f"{key}_front.png")
         files["front"] = f"{key}_front.png"
-        _save_png(sim.render_bev(json.dumps(dataclasses.asdict(BevConfig()))), out / f"{key}_bev.png")
+        _save_png(sim.render_bev(BevConfig()), out / f"{key}_bev.png")
         files["bev"] = f"{key}_bev.png"
         if extras:
             _save_png(sim.render("chase"), out / f"{key}_chase.png")
             files["chase"] = f"{key}_chase.png"
             _save_png(surround_sheet(sim.render_surround()), out / f"{key}_surround.png")
             files["surround"] = f"{key}_surround.png"
-        summary = json.loads(_core.validate_scenario(str(scenario), _sumo_home()))
+        summary = _core.validate_scenario(str(scenario), _sumo_home())
     finally:
         env.close()
     return GalleryEntry(key, summary.get("name", key), _description(scenario), files)

@@ -106,7 +106,7 @@ def traffic_mode(scenario: Path, config: R4Config) -> str:
     (a table without `mode` is SUMO). Loads the scenario, so a bad file is a `ScenarioError` here."""
     from drivehierarchy.envs.traffic import resolve_traffic_mode  # imports libsumo on use
 
-    sim = _core.Sim(str(scenario), config.replace(front=None, bev=None).to_json(), sumo_home())
+    sim = _core.Sim(str(scenario), config.replace(front=None, bev=None).to_core(), sumo_home())
     return resolve_traffic_mode(config.traffic, sim.scenario_traffic_mode)
 
 

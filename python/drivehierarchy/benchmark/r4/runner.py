@@ -67,7 +67,7 @@ from typing import Any
 from drivehierarchy._core import ConfigError, DriveHierarchyError
 from drivehierarchy.benchmark.r4.agents import AGENTS, VLM_AGENT, AgentRegistry, ConstantAgent
 from drivehierarchy.benchmark.r4.dispatch import Dispatch, Progress
-from drivehierarchy.benchmark.r4.drive import VIDEO_CAMERA_JSON, run_scene
+from drivehierarchy.benchmark.r4.drive import VIDEO_CAMERA, run_scene
 from drivehierarchy.benchmark.r4.faults import ScenariosFailed, SceneFailure
 from drivehierarchy.benchmark.r4.jobs import (
     Job,
@@ -100,7 +100,7 @@ from drivehierarchy.benchmark.r4.workers import WorkerDied, WorkerTimeout
 
 __all__ = [
     "AGENTS",
-    "VIDEO_CAMERA_JSON",
+    "VIDEO_CAMERA",
     "VLM_AGENT",
     "AgentRegistry",
     "BatchAborted",

@@ -118,7 +118,7 @@ def sha256_of(path: Path) -> str:
 
 
 def write_manifest(out: Path, jobs: list[Job], opts: RunOptions) -> None:
-    manifest = {
+    manifest: dict[str, Any] = {
         "drivehierarchy_version": __version__,
         "git_commit": git_commit(),
         "agent": opts.agent,
@@ -128,7 +128,7 @@ def write_manifest(out: Path, jobs: list[Job], opts: RunOptions) -> None:
         "vlm": opts.vlm.manifest() if opts.vlm is not None else None,
         "jobs": opts.jobs,
         "ray_address": opts.ray_address,
-        "config": json.loads(opts.config.to_json()),
+        "config": opts.config.to_core(),
         "scenarios": {
             j.key: {"path": str(j.scenario), "sha256": sha256_of(j.scenario), "seed": j.seed} for j in jobs
         },

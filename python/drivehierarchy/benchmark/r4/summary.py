@@ -3,7 +3,6 @@ the Table 2 files, and the offline re-scoring of a run's episode logs."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -139,7 +138,7 @@ def rescore_dir(out: Path) -> list[dict[str, Any]]:
             raise ConfigError(f"{out}: no episode_log.jsonl found (expected scenes/*/episode_log.jsonl)")
     rescored = []
     for log_path in scenes:
-        record = json.loads(_core.rescore(log_path.read_text(encoding="utf-8")))
+        record = _core.rescore(log_path.read_text(encoding="utf-8"))
         write_json_atomic(log_path.parent / "scene_score.rescored.json", record)
         rescored.append({"key": log_path.parent.name, "score": record})
     return rescored

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from drivehierarchy import _core
-from drivehierarchy.benchmark.r4.drive import VIDEO_CAMERA_JSON, finish_scene, save_frames
+from drivehierarchy.benchmark.r4.drive import VIDEO_CAMERA, finish_scene, save_frames
 from drivehierarchy.benchmark.r4.jobs import Job, RunOptions
 from drivehierarchy.benchmark.r4.store import fresh_scene_dir, write_json_atomic
 from drivehierarchy.envs.config import R4Config
@@ -82,7 +82,7 @@ class VlmScene:
         if self.frames:
             save_frames(self.scene_dir / "frames", decision, self.obs)
         if self.gif is not None:
-            self.gif.push(self.env.sim.render_camera(VIDEO_CAMERA_JSON))
+            self.gif.push(self.env.sim.render_camera(VIDEO_CAMERA))
 
     def finish(
         self, job: Job, opts: RunOptions, steps: int, wall: float, extra: dict[str, Any]
@@ -197,6 +197,7 @@ async def drive_vlm_scene(
         if aborted is None and stats.valid == 0:
             aborted = "no_valid_decision"
         wall = time.perf_counter() - t0
+        line: dict[str, Any]
         if aborted is not None:
             line = {
                 "key": job.key,

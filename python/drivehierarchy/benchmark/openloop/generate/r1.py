@@ -89,7 +89,8 @@ def _order(rec: dict[str, Any], id_key: str = "Question_id") -> dict[str, Any]:
 # -- R1_1 ---------------------------------------------------------------------------------------
 @register("R1_1_A", needs=Needs())
 def r1_1_a(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str, Any]]:
-    yes, no = [], []
+    yes: list[tuple[dict[str, Any], list[Frame]]] = []
+    no: list[tuple[dict[str, Any], list[Frame]]] = []
     for m, f in _front_frames(moments):
         for cat in CATEGORIES:
             if not _clear(f, cat):
@@ -465,7 +466,7 @@ def situation_answer(m: Moment, frames: list[Frame]) -> str:
 
 @register("R1_4", needs=Needs(history=R1_4_FRAMES, history_stride=R1_4_STRIDE))
 def r1_4(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str, Any]]:
-    cands = []
+    cands: list[tuple[dict[str, Any], list[Frame]]] = []
     for m in moments:
         frames = m.history(R1_4_FRAMES, R1_4_STRIDE)
         if frames is None:

@@ -221,7 +221,7 @@ def build_r2_1(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
                 "overlapping_instances": [str(i) for i in sorted(seen_in) if len(seen_in[i]) > 1],
                 "total_unique_count": count,
                 "camera_breakdown": {
-                    cam: sum(1 for v in f.visible if v.actor.category in VEHICLE_CATEGORIES)  # type: ignore[union-attr]
+                    cam: sum(1 for v in f.visible if v.actor.category in VEHICLE_CATEGORIES)  # type: ignore[union-attr, misc]
                     for cam, f in zip(SURROUND, frames, strict=True)
                 },
                 "subtype_distribution": _distribution(actor_of[i].actor.subtype for i in sorted(actor_of)),

@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import hashlib
 import io
-import json
 import math
 import random
 from collections.abc import Callable, Iterable, Sequence
@@ -438,7 +437,8 @@ def _visible(
     found: list[dict[str, Any]], actors: dict[int, ActorState], size: tuple[int, int]
 ) -> tuple[list[Visible], list[Visible]]:
     """(visible, partial): the actors passing the visibility rule and those shown only in part."""
-    out, partial = [], []
+    out: list[Visible] = []
+    partial: list[Visible] = []
     w, h = size
     for p in found:
         a = actors.get(int(p["id"]))
@@ -505,7 +505,7 @@ def rollout(
         overrides["traffic"] = traffic
     env = DriveHierarchyR4Env(scenario=str(scenario), **overrides)
     try:
-        sim = env.unwrapped.sim
+        sim = env.unwrapped.sim  # type: ignore[attr-defined]
         agent = make_driver(driver, seed)
         obs, info = env.reset(seed=seed)
         agent.reset(env, info)
@@ -524,7 +524,7 @@ def rollout(
             picked = [nd for nd, share in zip(needs, shares, strict=True) if u < share]
             for s, cams in frame_plan(picked, a).items():
                 plan.setdefault(s, set()).update(cams)
-        cfgs = {name: json.dumps(camera_config(name, size)) for name in SURROUND}
+        cfgs = {name: camera_config(name, size) for name in SURROUND}
         step = 0
         while True:
             ego = sim.ego_array()
@@ -538,8 +538,8 @@ def rollout(
                 jpg = encode_jpeg(np.asarray(img))
                 ro.frames[(cam, step)] = Frame(cam, step, float(sim.time_s), size, jpg, vis, part)
             action = agent.act(obs, info)
-            a = np.asarray(action, dtype=np.float64)
-            ro.actions.append((float(a[0]), float(a[1])))
+            act = np.asarray(action, dtype=np.float64)
+            ro.actions.append((float(act[0]), float(act[1])))
             obs, _, terminated, truncated, info = env.step(action)
             step += 1
             if terminated or truncated or step >= max_steps:
