@@ -7,6 +7,7 @@ mod editor;
 mod env;
 mod errors;
 mod json;
+mod render_facts;
 mod sumo_native;
 mod traffic;
 
@@ -17,5 +18,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     env::register(m)?;
     editor::register(m)?;
     benchmark::register(m)?;
+    render_facts::register(m)?;
     Ok(())
 }
