@@ -137,7 +137,8 @@ def bench_decisions(seconds: float) -> Rate:
 
     from drivehierarchy.scenarios import builtin_root
 
-    env = gym.make("DriveHierarchy-R4", scenario=str(builtin_root() / "bench" / "town01_30_actors.toml")).unwrapped
+    scenario = str(builtin_root() / "bench" / "town01_30_actors.toml")
+    env = gym.make("DriveHierarchy-R4", scenario=scenario).unwrapped
     env.reset(seed=0)
     seed = [0]
 
@@ -171,7 +172,7 @@ def run_child(pythonpath: str | None, args: argparse.Namespace) -> dict[str, Rat
     if pythonpath is not None:
         env["PYTHONPATH"] = pythonpath + os.pathsep + env.get("PYTHONPATH", "")
     cmd = [sys.executable, __file__, "--child", "--seconds", str(args.seconds), "--scenario", args.scenario]
-    cmd += ["--decisions", str(args.decisions)] + ([] if args.no_pin else [])
+    cmd += ["--decisions", str(args.decisions)] + (["--no-pin"] if args.no_pin else [])
     out = subprocess.run(cmd, env=env, check=True, capture_output=True, text=True).stdout
     return {k: Rate(**v) for k, v in json.loads(out.strip().splitlines()[-1]).items()}
 
@@ -186,14 +187,16 @@ def compare(args: argparse.Namespace) -> int:
                     best[side][k] = r
     print(f"before = {args.baseline}, after = this checkout; best of {args.rounds} alternating rounds")
     print(f"  {'':44} {'before':>10} {'after':>10} {'after/before':>13}   (per CPU second; wall in brackets)")
-    for k, label in (("decisions", "R4 decisions/s, front 800×450 + BEV 800×800"), ("pair", "front + BEV pairs/s")):
+    labels = (("decisions", "R4 decisions/s, front 800×450 + BEV 800×800"), ("pair", "front + BEV pairs/s"))
+    for k, label in labels:
         b, a = best["before"][k], best["after"][k]
         print(
             f"  {label:44} {b.per_cpu:10.1f} {a.per_cpu:10.1f} {a.per_cpu / b.per_cpu:12.2f}×"
             f"   ({b.per_wall:.1f} → {a.per_wall:.1f} wall)"
         )
     dec = best["after"]["decisions"].per_cpu
-    print(f"decisions/s target {DECISIONS_TARGET:.0f}: {'ok' if dec >= DECISIONS_TARGET else 'MISSED'} ({dec:.1f})")
+    verdict = "ok" if dec >= DECISIONS_TARGET else "MISSED"
+    print(f"decisions/s target {DECISIONS_TARGET:.0f}: {verdict} ({dec:.1f})")
     return 0
 
 

@@ -162,12 +162,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     shot.md.push(row.join("\n\n"));
 
-    // Curved road markings (town01's bend on C2T) with traffic, front and BEV.
-    let bend = net.lane_by_id("C2T_1").ok_or("town01 has no lane C2T_1")?;
-    let bp = net.lane_position(bend, 320.0);
+    // Curved road markings (town01 bend on T2R) with traffic, front and BEV.
+    let bend = net.lane_by_id("T2R_0").ok_or("town01 has no lane T2R_0")?;
+    let bp = net.lane_position(bend, 150.0);
     let bego = view(0, ActorKind::Car, bp, [30, 110, 230]);
     let bat = |f: f64, l: f64| {
-        let p = net.lane_position(bend, 320.0 + f);
+        let p = net.lane_position(bend, 150.0 + f);
         Pose::new(p.local_to_world(0.0, l), p.yaw)
     };
     let lead = ActorView { braking: true, ..view(9, ActorKind::Car, bat(22.0, 0.0), [36, 88, 204]) };

@@ -475,13 +475,18 @@ impl Renderer {
                 if d > MARKING_MAX_M {
                     continue;
                 }
-                let hw = sg.hw.max(d.min(60.0) * min_px * 0.5);
-                let (nx, ny) = (-dy / len * hw, dx / len * hw);
+                // Width from each end's own distance, so joined pieces share their end edges.
+                let hw_at = |p: [f32; 2]| {
+                    let dd = ((p[0] - cam.pos[0]).powi(2) + (p[1] - cam.pos[1]).powi(2)).sqrt();
+                    sg.hw.max(dd.min(60.0) * min_px * 0.5)
+                };
+                let (ha, hb) = (hw_at(sg.a), hw_at(sg.b));
+                let (na, nb) = ([sg.na[0] * ha, sg.na[1] * ha], [sg.nb[0] * hb, sg.nb[1] * hb]);
                 let q = [
-                    cam.to_cam([sg.a[0] - nx, sg.a[1] - ny, 0.0]),
-                    cam.to_cam([sg.b[0] - nx, sg.b[1] - ny, 0.0]),
-                    cam.to_cam([sg.b[0] + nx, sg.b[1] + ny, 0.0]),
-                    cam.to_cam([sg.a[0] + nx, sg.a[1] + ny, 0.0]),
+                    cam.to_cam([sg.a[0] - na[0], sg.a[1] - na[1], 0.0]),
+                    cam.to_cam([sg.b[0] - nb[0], sg.b[1] - nb[1], 0.0]),
+                    cam.to_cam([sg.b[0] + nb[0], sg.b[1] + nb[1], 0.0]),
+                    cam.to_cam([sg.a[0] + na[0], sg.a[1] + na[1], 0.0]),
                 ];
                 if cam.outside(&q) {
                     continue;
@@ -492,6 +497,19 @@ impl Renderer {
                     b.fill_convex(&poly[..n], col);
                 }
             }
+        }
+
+        // Shadows of the actors on the ground, under everything standing on it.
+        for a in frame.actors {
+            if a.id == frame.ego.id && a.pose == frame.ego.pose {
+                continue;
+            }
+            if may_see(cam, map, a) {
+                shadow(cam, map, a, b, &mut poly);
+            }
+        }
+        if cfg.draw_ego {
+            shadow(cam, map, frame.ego, b, &mut poly);
         }
 
         // 3-D: props, then the dynamic scene.
@@ -625,6 +643,61 @@ impl Renderer {
             self.render_camera(map, frame, cfg, out)?;
         }
         Ok(found)
+    }
+}
+
+/// Ground shadow of an actor: the convex hull of its footprint and the footprint moved away
+/// from the sun by its height (a cheap projected shadow), darkened to 62 %. Deterministic and
+/// allocation-free.
+fn shadow<B: RasterBackend>(cam: &Cam, map: &RenderMap, a: &ActorView, b: &mut B, poly: &mut [SV; 4]) {
+    let (l, w, h) = mesh::actor_dims(a);
+    let (hl, hw) = (l * 0.5 + 0.05, w * 0.5 + 0.05);
+    // People and bicycles are narrower than their footprint box: a slimmer blob.
+    let (hl, hw) = match a.kind {
+        crate::view::ActorKind::Pedestrian => (0.22 * h / 1.75, 0.22 * h / 1.75),
+        _ => (hl, hw),
+    };
+    let p = a.pose.pos - map.origin;
+    let (s, c) = a.pose.yaw.sin_cos();
+    let (f, lft) = ([c as f32, s as f32], [-s as f32, c as f32]);
+    let k = 0.55 * h / mesh::SUN[2];
+    let off = [-mesh::SUN[0] * k, -mesh::SUN[1] * k];
+    let mut pts = [[0f32; 2]; 8];
+    for (j, (u, v)) in [(hl, hw), (hl, -hw), (-hl, -hw), (-hl, hw)].into_iter().enumerate() {
+        let q = [p.x as f32 + f[0] * u + lft[0] * v, p.y as f32 + f[1] * u + lft[1] * v];
+        pts[j] = q;
+        pts[j + 4] = [q[0] + off[0], q[1] + off[1]];
+    }
+    // Convex hull (monotone chain) of the 8 points.
+    pts.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    let cross =
+        |o: [f32; 2], a: [f32; 2], b: [f32; 2]| (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]);
+    let mut hull = [[0f32; 2]; 16];
+    let mut n = 0;
+    for pass in 0..2 {
+        let start = n;
+        for k in 0..8 {
+            let q = if pass == 0 { pts[k] } else { pts[7 - k] };
+            while n >= start + 2 && cross(hull[n - 2], hull[n - 1], q) <= 0.0 {
+                n -= 1;
+            }
+            hull[n] = q;
+            n += 1;
+        }
+        n -= 1;
+    }
+    if n < 3 {
+        return;
+    }
+    let g = |q: [f32; 2]| cam.to_cam([q[0], q[1], 0.0]);
+    let c0 = g(hull[0]);
+    for k in 1..n - 1 {
+        let t = [c0, g(hull[k]), g(hull[k + 1])];
+        if cam.outside(&t) {
+            continue;
+        }
+        let m = cam.clip_project(t, poly);
+        b.darken_convex(&poly[..m], 158);
     }
 }
 
