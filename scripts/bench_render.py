@@ -14,8 +14,16 @@ then highway-env's `highway-v0` at 800×450. Wall time and process CPU time are 
 because the machine may be shared: CPU-time rates are what the renderer costs.
 
     python scripts/bench_render.py [--seconds 2] [--scenario 04_intersection/...] [--no-highway]
+    python scripts/bench_render.py --baseline DIR   # before/after: DIR holds another build's
+                                                    # `drivehierarchy` package (e.g. main's)
 
-Targets (issue 3): pairs ≥ 150/s, front 400×225 ≥ 600/s, BEV 128 ≥ 2,000/s.
+Also measures R4 decisions/s with both protocol images rendered at every decision (the 30-actor
+bench scenario, expert driver). With `--baseline`, the decisions/s and pair rates of the build in
+DIR are measured in a child process in the same run, alternating rounds with this build, and
+printed beside ours with ratios (the machine may be shared, so only same-run ratios compare).
+
+Targets (issue 3): pairs ≥ 150/s, front 400×225 ≥ 600/s, BEV 128 ≥ 2,000/s; issue 34:
+≥ 600 decisions/s with front 800×450 + BEV 800×800.
 """
 
 from __future__ import annotations
@@ -38,6 +46,7 @@ OFFICIAL = REPO / "../shared/official/Close_Loop_Evaluation"
 TONGJI = OFFICIAL / "Carla_Simulation/Co-Simulation/Sumo/tongji/tongji.net.xml"
 ONSITE = OFFICIAL / "Scenario_Onsite"
 TARGETS = {"pair": 150.0, "front400": 600.0, "bev128": 2000.0}
+DECISIONS_TARGET = 600.0
 
 
 @dataclasses.dataclass
@@ -120,6 +129,75 @@ def drive_to_mid_episode(scenario: str, decisions: int) -> tuple[Any, Any, int]:
         if term or trunc:
             break
     return env, env.sim, done
+
+
+def bench_decisions(seconds: float) -> Rate:
+    """R4 decisions/s with the protocol's front camera and BEV rendered at every decision."""
+    import gymnasium as gym
+
+    from drivehierarchy.scenarios import builtin_root
+
+    scenario = str(builtin_root() / "bench" / "town01_30_actors.toml")
+    env = gym.make("DriveHierarchy-R4", scenario=scenario).unwrapped
+    env.reset(seed=0)
+    seed = [0]
+
+    def step() -> None:
+        _, _, term, trunc, _ = env.step(env.expert_action())
+        if term or trunc:
+            seed[0] += 1
+            env.reset(seed=seed[0])
+
+    rate = measure(step, seconds)
+    env.close()
+    return rate
+
+
+def child_rates(seconds: float, scenario: str, decisions: int) -> dict[str, Rate]:
+    """The rows `--baseline` compares, measured in this process (run as the child)."""
+    import drivehierarchy  # noqa: F401  (registers DriveHierarchy-R4)
+
+    env, sim, _ = drive_to_mid_episode(scenario, decisions)
+    front, bev = camera_config(), bev_config()
+    out = {"pair": measure(lambda: (sim.render_camera(front), sim.render_bev(bev)), seconds)}
+    env.close()
+    out["decisions"] = bench_decisions(seconds)
+    return out
+
+
+def run_child(pythonpath: str | None, args: argparse.Namespace) -> dict[str, Rate]:
+    import subprocess
+
+    env = dict(os.environ)
+    if pythonpath is not None:
+        env["PYTHONPATH"] = pythonpath + os.pathsep + env.get("PYTHONPATH", "")
+    cmd = [sys.executable, __file__, "--child", "--seconds", str(args.seconds), "--scenario", args.scenario]
+    cmd += ["--decisions", str(args.decisions)] + (["--no-pin"] if args.no_pin else [])
+    out = subprocess.run(cmd, env=env, check=True, capture_output=True, text=True).stdout
+    return {k: Rate(**v) for k, v in json.loads(out.strip().splitlines()[-1]).items()}
+
+
+def compare(args: argparse.Namespace) -> int:
+    """Before/after in one run: alternate baseline and this build, keep each side's best round."""
+    best: dict[str, dict[str, Rate]] = {"before": {}, "after": {}}
+    for _ in range(args.rounds):
+        for side, path in (("before", args.baseline), ("after", None)):
+            for k, r in run_child(path, args).items():
+                if k not in best[side] or r.per_cpu > best[side][k].per_cpu:
+                    best[side][k] = r
+    print(f"before = {args.baseline}, after = this checkout; best of {args.rounds} alternating rounds")
+    print(f"  {'':44} {'before':>10} {'after':>10} {'after/before':>13}   (per CPU second; wall in brackets)")
+    labels = (("decisions", "R4 decisions/s, front 800×450 + BEV 800×800"), ("pair", "front + BEV pairs/s"))
+    for k, label in labels:
+        b, a = best["before"][k], best["after"][k]
+        print(
+            f"  {label:44} {b.per_cpu:10.1f} {a.per_cpu:10.1f} {a.per_cpu / b.per_cpu:12.2f}×"
+            f"   ({b.per_wall:.1f} → {a.per_wall:.1f} wall)"
+        )
+    dec = best["after"]["decisions"].per_cpu
+    verdict = "ok" if dec >= DECISIONS_TARGET else "MISSED"
+    print(f"decisions/s target {DECISIONS_TARGET:.0f}: {verdict} ({dec:.1f})")
+    return 0
 
 
 def in_view(sim: Any) -> int:
@@ -218,11 +296,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-highway", action="store_true")
     ap.add_argument("--no-pin", action="store_true", help="do not pin the process to one core")
     ap.add_argument("--quick", action="store_true", help="smoke run (CI): 0.1 s per measurement")
+    ap.add_argument("--baseline", help="directory holding another build's drivehierarchy package")
+    ap.add_argument("--rounds", type=int, default=2, help="alternating rounds with --baseline")
+    ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.quick:
         args.seconds, args.decisions = 0.1, 4
 
     pinned = "not pinned" if args.no_pin else pin_one_core()
+    if args.child:
+        rates = child_rates(args.seconds, args.scenario, args.decisions)
+        print(json.dumps({k: dataclasses.asdict(r) for k, r in rates.items()}))
+        return 0
+    if args.baseline:
+        return compare(args)
     import drivehierarchy
 
     print(f"drivehierarchy {drivehierarchy.__version__}, {pinned}, {args.seconds:.1f} s per measurement")
@@ -232,6 +319,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{args.scenario}: after {k} expert decisions, {in_view(sim)} actors in the front camera")
     results["builtin"] = bench_sim(sim, args.seconds)
     env.close()
+    decisions = bench_decisions(args.seconds)
 
     with tempfile.TemporaryDirectory() as tmp:
         path = tongji_scenario(Path(tmp))
@@ -256,7 +344,11 @@ def main(argv: list[str] | None = None) -> int:
     if peer is not None:
         print("highway-env highway-v0 rgb_array")
         print(row("800×450", peer))
+    print("R4 — town01_30_actors, expert")
+    print(row("decisions/s, front 800×450 + BEV 800×800", decisions, DECISIONS_TARGET))
     missed = [f"{name}/{k}" for name, r in results.items() for k, t in TARGETS.items() if r[k].per_cpu < t]
+    if decisions.per_cpu < DECISIONS_TARGET:
+        missed.append("decisions")
     print()
     print("all targets met (CPU time)" if not missed else f"targets missed (CPU time): {', '.join(missed)}")
     return 0

@@ -422,6 +422,7 @@ fn projected_to_py<'py>(
         d.set_item("distance_m", a.distance_m)?;
         d.set_item("visible_fraction", a.visible_fraction)?;
         d.set_item("pixel_count", a.pixel_count)?;
+        d.set_item("colour_name", a.colour_name)?;
         out.append(d)?;
     }
     Ok(out)

@@ -10,6 +10,7 @@ mod facts;
 mod json;
 mod network;
 mod sumo_home;
+mod render_facts;
 mod sumo_native;
 mod traffic;
 
@@ -23,5 +24,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     benchmark::register(m)?;
     network::register(m)?;
     sumo_home::register(m)?;
+    render_facts::register(m)?;
     Ok(())
 }

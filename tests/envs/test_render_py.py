@@ -154,6 +154,29 @@ def test_project_actors_finds_the_lead_vehicle_ahead() -> None:
     assert not [a for a in env.unwrapped.sim.project_actors(cam_json(yaw_deg=180.0)) if a["id"] in (1, 2)]
 
 
+def test_project_actors_names_each_actor_colour_from_its_pixels() -> None:
+    env = no_image_env(LEAD_BRAKES)
+    env.reset(seed=0)
+    names = {p["name"] for p in _core.colour_palette()}
+    found = env.unwrapped.sim.project_actors(cam_json())
+    assert found and all(a["colour_name"] in names for a in found), found
+    # The two scenario cars get the default actor colours in file order: red, then blue.
+    by_id = {a["id"]: a for a in found}
+    assert by_id[1]["colour_name"] == "red" and by_id[2]["colour_name"] == "blue", by_id
+
+
+def test_palette_entries_are_named_by_their_own_names() -> None:
+    pal = _core.colour_palette()
+    assert [p["name"] for p in pal][:4] == ["black", "white", "silver", "gray"]
+    for p in pal:
+        assert _core.colour_name(p["rgb"]) == p["name"]
+        lo, hi = p["value"]
+        assert 0.0 <= lo < hi
+    white, glass = (240, 240, 238), (50, 64, 82)
+    assert _core.colour_name_of_pixels([white, white, glass]) == "white"
+    assert _core.colour_name_of_pixels([]) is None
+
+
 # -- traffic lights ---------------------------------------------------------------------------
 
 

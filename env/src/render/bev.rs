@@ -172,7 +172,19 @@ impl Renderer {
                 if off(&[p, q]) {
                     continue;
                 }
-                b.stroke_segment(p, q, (sg.hw * v.s).max(0.5), cols[sg.mat as usize]);
+                // Mitred quad (see `Seg`), at least one pixel wide.
+                let hw = sg.hw.max(0.5 / v.s);
+                let at =
+                    |c: [f32; 2], n: [f32; 2], k: f32| v.px([c[0] + n[0] * hw * k, c[1] + n[1] * hw * k]);
+                b.fill_convex(
+                    &[
+                        at(sg.a, sg.na, -1.0),
+                        at(sg.b, sg.nb, -1.0),
+                        at(sg.b, sg.nb, 1.0),
+                        at(sg.a, sg.na, 1.0),
+                    ],
+                    cols[sg.mat as usize],
+                );
             }
         }
         // Signal state bars across the controlled lane at its stop line.

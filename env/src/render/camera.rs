@@ -8,9 +8,10 @@
 use super::frame::{FrameInput, Renderer};
 use super::image::Image;
 use super::map::{Mat, RenderMap, N_LAYERS, N_MATS};
-use super::mesh::{self, dot, Frame, Tri3};
+use super::mesh::{self, dot, Frame, Tri3, PAINT_BIT};
 use super::raster::{fill_mask, Planes, RasterBackend, SV};
 use crate::error::{Error, Result};
+use crate::view::ActorView;
 use serde::{Deserialize, Serialize};
 
 /// A camera rigidly mounted on the ego vehicle.
@@ -157,6 +158,10 @@ pub struct ProjectedActor {
     pub visible_fraction: f32,
     /// Silhouette pixels inside the image.
     pub pixel_count: u32,
+    /// The colour name a viewer gives the actor from the visible pixels of its body paint
+    /// (vehicle panels, a person's top, a bicycle's frame) in this image
+    /// ([`super::palette::name_pixels`]); `None` when no paint is visible.
+    pub colour_name: Option<&'static str>,
 }
 
 const NEAR: f32 = 0.1;
@@ -166,6 +171,8 @@ const GRASS: [f32; 3] = [110.0, 128.0, 88.0];
 const FOG0: f32 = 45.0;
 const MARKING_MAX_M: f32 = 130.0;
 const FOG1: f32 = 260.0;
+/// Actors nearer than this get their detailed mesh (rounder wheels).
+const DETAIL_M: f64 = 35.0;
 
 fn mat_colors() -> [[u8; 3]; N_MATS] {
     let mut c = [[0u8; 3]; N_MATS];
@@ -326,17 +333,41 @@ fn lerp3(a: [f32; 3], b: [f32; 3], t: f32) -> [u8; 3] {
 /// cos of the half-angle within which a signal's lit lamp is visible (visor cone, 55°).
 const VISOR_COS: f64 = 0.57;
 
-/// Appends the dynamic scene (actors, signals, signs) to `out`; actor triangles carry
-/// id = index in `frame.actors` + 1, the ego `u32::MAX` when drawn.
-pub(crate) fn dynamic_tris(map: &RenderMap, frame: &FrameInput, draw_ego: bool, out: &mut Vec<Tri3>) {
+/// Whether any part of actor `a` can be in the camera's view (its bounding box vs the frustum
+/// and the draw distance): actors outside are not meshed at all.
+fn may_see(cam: &Cam, map: &RenderMap, a: &ActorView) -> bool {
+    let (l, w, h) = mesh::actor_dims(a);
+    let r = 0.5 * (l * l + w * w).sqrt() + 0.1;
+    let p = a.pose.pos - map.origin;
+    let (x, y) = (p.x as f32, p.y as f32);
+    let (dx, dy) = (x - cam.pos[0], y - cam.pos[1]);
+    if dx * dx + dy * dy > (cam.far + r) * (cam.far + r) {
+        return false;
+    }
+    cam.sees_box([x - r, y - r, x + r, y + r], h + 0.3)
+}
+
+/// Appends the dynamic scene (actors, signals, signs) the camera may see to `out`; actor
+/// triangles carry id = index in `frame.actors` + 1, the ego `u32::MAX` when drawn.
+pub(crate) fn dynamic_tris(
+    cam: &Cam,
+    map: &RenderMap,
+    frame: &FrameInput,
+    draw_ego: bool,
+    out: &mut Vec<Tri3>,
+) {
     if draw_ego {
-        mesh::actor(out, frame.ego, map.origin, u32::MAX);
+        mesh::actor(out, frame.ego, map.origin, u32::MAX, true);
     }
     for (i, a) in frame.actors.iter().enumerate() {
         if a.id == frame.ego.id && a.pose == frame.ego.pose {
             continue;
         }
-        mesh::actor(out, a, map.origin, i as u32 + 1);
+        if !may_see(cam, map, a) {
+            continue;
+        }
+        let near = a.pose.pos.dist(frame.ego.pose.pos) < DETAIL_M;
+        mesh::actor(out, a, map.origin, i as u32 + 1, near);
     }
     for l in frame.lights {
         let place = map.signal_places.get(&l.lane_id);
@@ -444,13 +475,18 @@ impl Renderer {
                 if d > MARKING_MAX_M {
                     continue;
                 }
-                let hw = sg.hw.max(d.min(60.0) * min_px * 0.5);
-                let (nx, ny) = (-dy / len * hw, dx / len * hw);
+                // Width from each end's own distance, so joined pieces share their end edges.
+                let hw_at = |p: [f32; 2]| {
+                    let dd = ((p[0] - cam.pos[0]).powi(2) + (p[1] - cam.pos[1]).powi(2)).sqrt();
+                    sg.hw.max(dd.min(60.0) * min_px * 0.5)
+                };
+                let (ha, hb) = (hw_at(sg.a), hw_at(sg.b));
+                let (na, nb) = ([sg.na[0] * ha, sg.na[1] * ha], [sg.nb[0] * hb, sg.nb[1] * hb]);
                 let q = [
-                    cam.to_cam([sg.a[0] - nx, sg.a[1] - ny, 0.0]),
-                    cam.to_cam([sg.b[0] - nx, sg.b[1] - ny, 0.0]),
-                    cam.to_cam([sg.b[0] + nx, sg.b[1] + ny, 0.0]),
-                    cam.to_cam([sg.a[0] + nx, sg.a[1] + ny, 0.0]),
+                    cam.to_cam([sg.a[0] - na[0], sg.a[1] - na[1], 0.0]),
+                    cam.to_cam([sg.b[0] - nb[0], sg.b[1] - nb[1], 0.0]),
+                    cam.to_cam([sg.b[0] + nb[0], sg.b[1] + nb[1], 0.0]),
+                    cam.to_cam([sg.a[0] + na[0], sg.a[1] + na[1], 0.0]),
                 ];
                 if cam.outside(&q) {
                     continue;
@@ -463,10 +499,23 @@ impl Renderer {
             }
         }
 
+        // Shadows of the actors on the ground, under everything standing on it.
+        for a in frame.actors {
+            if a.id == frame.ego.id && a.pose == frame.ego.pose {
+                continue;
+            }
+            if may_see(cam, map, a) {
+                shadow(cam, map, a, b, &mut poly);
+            }
+        }
+        if cfg.draw_ego {
+            shadow(cam, map, frame.ego, b, &mut poly);
+        }
+
         // 3-D: props, then the dynamic scene.
         let mut dynamic = std::mem::take(&mut self.tris);
         dynamic.clear();
-        dynamic_tris(map, frame, cfg.draw_ego, &mut dynamic);
+        dynamic_tris(cam, map, frame, cfg.draw_ego, &mut dynamic);
         for &off in &self.cells {
             let c = &map.cells[off];
             for tr in &map.props[c.props.0 as usize..c.props.1 as usize] {
@@ -507,8 +556,11 @@ impl Renderer {
                 continue;
             }
             let stamp = i as u32 + 1;
+            if !may_see(&cam, map, a) {
+                continue;
+            }
             tris.clear();
-            mesh::actor(&mut tris, a, map.origin, stamp);
+            mesh::actor(&mut tris, a, map.origin, stamp, a.pose.pos.dist(frame.ego.pose.pos) < DETAIL_M);
             let mut total = 0usize;
             for tr in &tris {
                 let c = tr.p.map(|p| cam.to_cam(p));
@@ -525,6 +577,8 @@ impl Renderer {
             }
             let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
             let mut visible = 0usize;
+            let mut px = std::mem::take(&mut self.px);
+            px.clear();
             for y in 0..h {
                 let row = &mask[y * w..(y + 1) * w];
                 if !row.contains(&stamp) {
@@ -536,8 +590,13 @@ impl Renderer {
                         x1 = x1.max(x + 1);
                         y0 = y0.min(y);
                         y1 = y1.max(y + 1);
-                        if ids[y * w + x] == stamp {
+                        let id = ids[y * w + x];
+                        if id & !PAINT_BIT == stamp {
                             visible += 1;
+                            if id & PAINT_BIT != 0 {
+                                let o = (y * w + x) * 3;
+                                px.push([self.ss[o], self.ss[o + 1], self.ss[o + 2]]);
+                            }
                         }
                     }
                 }
@@ -553,7 +612,9 @@ impl Renderer {
                 distance_m: a.pose.pos.dist(frame.ego.pose.pos),
                 visible_fraction: visible as f32 / total as f32,
                 pixel_count: total as u32,
+                colour_name: super::palette::name_pixels(&px),
             });
+            self.px = px;
         }
         self.tris = tris;
         self.mask = mask;
@@ -582,6 +643,61 @@ impl Renderer {
             self.render_camera(map, frame, cfg, out)?;
         }
         Ok(found)
+    }
+}
+
+/// Ground shadow of an actor: the convex hull of its footprint and the footprint moved away
+/// from the sun by its height (a cheap projected shadow), darkened to 62 %. Deterministic and
+/// allocation-free.
+fn shadow<B: RasterBackend>(cam: &Cam, map: &RenderMap, a: &ActorView, b: &mut B, poly: &mut [SV; 4]) {
+    let (l, w, h) = mesh::actor_dims(a);
+    let (hl, hw) = (l * 0.5 + 0.05, w * 0.5 + 0.05);
+    // People and bicycles are narrower than their footprint box: a slimmer blob.
+    let (hl, hw) = match a.kind {
+        crate::view::ActorKind::Pedestrian => (0.22 * h / 1.75, 0.22 * h / 1.75),
+        _ => (hl, hw),
+    };
+    let p = a.pose.pos - map.origin;
+    let (s, c) = a.pose.yaw.sin_cos();
+    let (f, lft) = ([c as f32, s as f32], [-s as f32, c as f32]);
+    let k = 0.55 * h / mesh::SUN[2];
+    let off = [-mesh::SUN[0] * k, -mesh::SUN[1] * k];
+    let mut pts = [[0f32; 2]; 8];
+    for (j, (u, v)) in [(hl, hw), (hl, -hw), (-hl, -hw), (-hl, hw)].into_iter().enumerate() {
+        let q = [p.x as f32 + f[0] * u + lft[0] * v, p.y as f32 + f[1] * u + lft[1] * v];
+        pts[j] = q;
+        pts[j + 4] = [q[0] + off[0], q[1] + off[1]];
+    }
+    // Convex hull (monotone chain) of the 8 points.
+    pts.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    let cross =
+        |o: [f32; 2], a: [f32; 2], b: [f32; 2]| (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]);
+    let mut hull = [[0f32; 2]; 16];
+    let mut n = 0;
+    for pass in 0..2 {
+        let start = n;
+        for k in 0..8 {
+            let q = if pass == 0 { pts[k] } else { pts[7 - k] };
+            while n >= start + 2 && cross(hull[n - 2], hull[n - 1], q) <= 0.0 {
+                n -= 1;
+            }
+            hull[n] = q;
+            n += 1;
+        }
+        n -= 1;
+    }
+    if n < 3 {
+        return;
+    }
+    let g = |q: [f32; 2]| cam.to_cam([q[0], q[1], 0.0]);
+    let c0 = g(hull[0]);
+    for k in 1..n - 1 {
+        let t = [c0, g(hull[k]), g(hull[k + 1])];
+        if cam.outside(&t) {
+            continue;
+        }
+        let m = cam.clip_project(t, poly);
+        b.darken_convex(&poly[..m], 158);
     }
 }
 

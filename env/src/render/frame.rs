@@ -61,6 +61,8 @@ pub struct Renderer {
     pub(super) tris: Vec<super::mesh::Tri3>,
     pub(super) cells: Vec<usize>,
     pub(super) pts: Vec<super::raster::SV>,
+    /// Visible pixels of one actor (colour naming in `project_actors`).
+    pub(super) px: Vec<[u8; 3]>,
 }
 
 impl std::fmt::Debug for Renderer {

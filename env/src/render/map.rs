@@ -38,13 +38,42 @@ pub(crate) struct GTri {
     pub mat: Mat,
 }
 
-/// A painted stripe: centre line a→b with half width `hw` metres.
+/// A painted stripe: centre line a→b with half width `hw` metres. `na`/`nb` are the stripe's
+/// left offset directions at a and b, unit length across a straight stripe and mitred (the
+/// bisector, lengthened by 1/cos of the half turn) where a line turns, so consecutive pieces of a
+/// curved line share their end edges exactly: no notches, overlaps or kinks on curves.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Seg {
     pub a: [f32; 2],
     pub b: [f32; 2],
+    pub na: [f32; 2],
+    pub nb: [f32; 2],
     pub hw: f32,
     pub mat: Mat,
+}
+
+/// Mitred left offset directions at every vertex of a polyline (see [`Seg`]); the mitre is
+/// limited to 2× for sharp turns.
+fn mitres(pts: &[Vec2]) -> Vec<Vec2> {
+    let n = pts.len();
+    let seg_n = |i: usize| (pts[i + 1] - pts[i]).normalized().perp();
+    (0..n)
+        .map(|i| {
+            if n < 2 {
+                return Vec2::new(0.0, 0.0);
+            }
+            if i == 0 {
+                return seg_n(0);
+            }
+            if i == n - 1 {
+                return seg_n(n - 2);
+            }
+            let (a, b) = (seg_n(i - 1), seg_n(i));
+            let m = (a + b).normalized();
+            let c = m.dot(a).max(0.5);
+            m * (1.0 / c)
+        })
+        .collect()
 }
 
 #[derive(Clone, Debug)]
@@ -324,39 +353,66 @@ impl Collect {
             }
         }
     }
-    fn seg(&mut self, origin: Vec2, a: Vec2, b: Vec2, hw: f64, mat: Mat) {
+    /// A straight stripe a→b (split into pieces for the cell grid), with the offset directions
+    /// `na`, `nb` at its ends (None = square ends).
+    #[allow(clippy::too_many_arguments)]
+    fn seg_mitred(
+        &mut self,
+        origin: Vec2,
+        a: Vec2,
+        b: Vec2,
+        na: Option<Vec2>,
+        nb: Option<Vec2>,
+        hw: f64,
+        mat: Mat,
+    ) {
         let len = a.dist(b);
         if len < 1e-6 {
             return;
         }
+        let perp = (b - a).normalized().perp();
+        let f = |v: Vec2| [v.x as f32, v.y as f32];
         let k = (len / PIECE_M).ceil().max(1.0) as usize;
         for j in 0..k {
             let p0 = a.lerp(b, j as f64 / k as f64) - origin;
             let p1 = a.lerp(b, (j + 1) as f64 / k as f64) - origin;
-            self.segs.push(Seg {
-                a: [p0.x as f32, p0.y as f32],
-                b: [p1.x as f32, p1.y as f32],
-                hw: hw as f32,
-                mat,
-            });
+            let n0 = if j == 0 { na.unwrap_or(perp) } else { perp };
+            let n1 = if j == k - 1 { nb.unwrap_or(perp) } else { perp };
+            self.segs.push(Seg { a: f(p0), b: f(p1), na: f(n0), nb: f(n1), hw: hw as f32, mat });
         }
+    }
+    fn seg(&mut self, origin: Vec2, a: Vec2, b: Vec2, hw: f64, mat: Mat) {
+        self.seg_mitred(origin, a, b, None, None, hw, mat);
     }
     fn solid(&mut self, origin: Vec2, pts: &[Vec2], hw: f64, mat: Mat) {
-        for w in pts.windows(2) {
-            self.seg(origin, w[0], w[1], hw, mat);
+        let m = mitres(pts);
+        for (i, w) in pts.windows(2).enumerate() {
+            self.seg_mitred(origin, w[0], w[1], Some(m[i]), Some(m[i + 1]), hw, mat);
         }
     }
-    /// Dashes of `dash` metres every `period` metres along a polyline.
+    /// Dashes of `dash` metres every `period` metres along a polyline; a dash running over a
+    /// vertex is mitred there.
     fn dashed(&mut self, origin: Vec2, pts: &[Vec2], hw: f64, mat: Mat, dash: f64, period: f64) {
+        let m = mitres(pts);
         let mut s0 = 0.0;
-        for w in pts.windows(2) {
+        for (i, w) in pts.windows(2).enumerate() {
             let len = w[0].dist(w[1]);
             let mut s = 0.0;
             while s < len {
                 let phase = (s0 + s) % period;
                 if phase < dash {
                     let e = (s + dash - phase).min(len);
-                    self.seg(origin, w[0].lerp(w[1], s / len), w[0].lerp(w[1], e / len), hw, mat);
+                    let na = (s == 0.0 && i > 0).then_some(m[i]);
+                    let nb = (e >= len && i + 2 < pts.len()).then_some(m[i + 1]);
+                    self.seg_mitred(
+                        origin,
+                        w[0].lerp(w[1], s / len),
+                        w[0].lerp(w[1], e / len),
+                        na,
+                        nb,
+                        hw,
+                        mat,
+                    );
                     s = e;
                 } else {
                     s += period - phase;

@@ -20,7 +20,16 @@ pub(crate) struct Tri3 {
     pub id: u32,
 }
 
-const SUN: [f32; 3] = [0.35, 0.25, 0.9];
+/// Direction towards the noon sun (normalised in [`shade`]).
+pub(crate) const SUN: [f32; 3] = [0.35, 0.25, 0.9];
+/// Sky light every face gets, and the sun's share on a face turned fully to it. Sunlit faces
+/// reach ~1.09 × their colour so paint reads as its name (white stays white, silver silver);
+/// faces turned away keep 0.82, enough shape contrast without turning white into gray.
+pub(crate) const AMBIENT: f32 = 0.82;
+pub(crate) const DIFFUSE: f32 = 0.30;
+/// A face is "sunlit" for the palette guarantee when cos(normal, sun) reaches this.
+#[cfg(test)]
+pub(crate) const LIT_MIN_COS: f32 = 0.3;
 
 fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
@@ -43,8 +52,8 @@ fn normalize(a: [f32; 3]) -> [f32; 3] {
 /// Lambert + ambient shading of a base colour for a face normal.
 pub(crate) fn shade(col: [u8; 3], n: [f32; 3]) -> [u8; 3] {
     let s = normalize(SUN);
-    let k = 0.58 + 0.42 * dot(n, s).max(0.0);
-    [(col[0] as f32 * k) as u8, (col[1] as f32 * k) as u8, (col[2] as f32 * k) as u8]
+    let k = AMBIENT + DIFFUSE * dot(n, s).max(0.0);
+    col.map(|c| (c as f32 * k).min(255.0) as u8)
 }
 
 /// Local frame on the ground: origin, forward and left unit vectors.
@@ -88,11 +97,28 @@ pub(crate) fn all(c: [u8; 3]) -> FaceCols {
 pub(crate) struct Mesh<'a> {
     pub out: &'a mut Vec<Tri3>,
     pub id: u32,
+    /// The actor's body colour: faces drawn in it carry [`PAINT_BIT`] in their id, so the id
+    /// buffer tells paint from glazing, tyres, lamps and skin (colour naming reads paint only).
+    pub paint: Option<[u8; 3]>,
+}
+
+/// Set in a [`Tri3::id`] (and the id buffer) on faces in the actor's body colour.
+pub(crate) const PAINT_BIT: u32 = 1 << 31;
+
+impl Mesh<'_> {
+    #[inline]
+    fn tri_id(&self, col: [u8; 3]) -> u32 {
+        if self.id != 0 && self.id != u32::MAX && self.paint == Some(col) {
+            self.id | PAINT_BIT
+        } else {
+            self.id
+        }
+    }
 }
 
 impl Mesh<'_> {
     #[allow(clippy::too_many_arguments)]
-    fn quad(
+    pub(crate) fn quad(
         &mut self,
         a: [f32; 3],
         b: [f32; 3],
@@ -110,8 +136,9 @@ impl Mesh<'_> {
         if dot(n, sub(fc, centre)) < 0.0 {
             n = [-n[0], -n[1], -n[2]];
         }
+        let id = self.tri_id(col);
         let col = if emissive { col } else { shade(col, n) };
-        let t = |p: [[f32; 3]; 3]| Tri3 { p, n, col, emissive, two_sided: false, id: self.id };
+        let t = |p: [[f32; 3]; 3]| Tri3 { p, n, col, emissive, two_sided: false, id };
         let (t1, t2) = (t([a, b, c]), t([a, c, d]));
         self.out.push(t1);
         self.out.push(t2);
@@ -194,6 +221,7 @@ impl Mesh<'_> {
         emissive: bool,
     ) {
         let normal = [fr.f[0], fr.f[1], 0.0];
+        let id = self.tri_id(col);
         let col = if emissive { col } else { shade(col, normal) };
         let centre = fr.pt(fwd, left, z);
         let vert = |i: usize| {
@@ -207,7 +235,7 @@ impl Mesh<'_> {
                 col,
                 emissive,
                 two_sided: false,
-                id: self.id,
+                id,
             });
         }
     }
@@ -221,20 +249,10 @@ fn scale(c: [u8; 3], k: f32) -> [u8; 3] {
     ]
 }
 
-const GLASS: [u8; 3] = [40, 55, 75];
 const TYRE: [u8; 3] = [22, 22, 24];
 const AMBER: [u8; 3] = [255, 165, 0];
 const SKIN: [u8; 3] = [224, 172, 135];
 const TROUSERS: [u8; 3] = [55, 75, 140];
-
-fn wheels(m: &mut Mesh, fr: &Frame, hl: f32, hw: f32, r: f32, axles: &[f32]) {
-    for &x in axles {
-        let x = x.clamp(-hl + r, hl - r);
-        for side in [-1.0f32, 1.0] {
-            m.bx(fr, x, side * (hw - 0.13), 0.0, 2.0 * r, r, 0.14, &all(TYRE));
-        }
-    }
-}
 
 fn lights(m: &mut Mesh, fr: &Frame, hl: f32, hw: f32, z: f32, braking: bool, blinkers: u8) {
     let brake = if braking { [255, 25, 25] } else { [120, 20, 20] };
@@ -289,6 +307,81 @@ impl Mesh<'_> {
     }
 }
 
+impl Mesh<'_> {
+    /// A square-section bar from local point `a` to `b` (each (fwd, left, z) in `fr`): `hs` is
+    /// its half thickness across the bar in the plane of the bar and the vertical, `hl` its
+    /// half width along the frame's left axis (limbs, bicycle tubes, wheel rims).
+    #[allow(clippy::too_many_arguments)]
+    pub fn strut(&mut self, fr: &Frame, a: [f32; 3], b: [f32; 3], hs: f32, hl: f32, col: [u8; 3]) {
+        let pa = fr.pt(a[0], a[1], a[2]);
+        let pb = fr.pt(b[0], b[1], b[2]);
+        let d = sub(pb, pa);
+        if dot(d, d) < 1e-10 {
+            return;
+        }
+        // Across the bar: the frame's left axis made perpendicular to the bar, then the third.
+        let l = [fr.l[0], fr.l[1], 0.0];
+        let dn = normalize(d);
+        let u = normalize(sub(l, [dn[0] * dot(l, dn), dn[1] * dot(l, dn), dn[2] * dot(l, dn)]));
+        let v = normalize(cross(dn, u));
+        let off = |p: [f32; 3], su: f32, sv: f32| {
+            [
+                p[0] + u[0] * su * hl + v[0] * sv * hs,
+                p[1] + u[1] * su * hl + v[1] * sv * hs,
+                p[2] + u[2] * su * hl + v[2] * sv * hs,
+            ]
+        };
+        let ring = |p| [off(p, 1.0, 1.0), off(p, -1.0, 1.0), off(p, -1.0, -1.0), off(p, 1.0, -1.0)];
+        let (ra, rb) = (ring(pa), ring(pb));
+        self.hexa([ra[0], ra[1], ra[2], ra[3], rb[0], rb[1], rb[2], rb[3]], &all(col), true);
+    }
+
+    /// An n-sided wheel (prism) on the axle line of `fr` at (fwd, left), radius `r`, half width
+    /// `hw`: a tread in `tyre` and a hub disc in `hub` on the face towards `outward` (sign of
+    /// the frame's left axis; 0 for a wheel seen from both sides, e.g. a bicycle's, which then
+    /// gets the disc on its left face and is two-sided).
+    #[allow(clippy::too_many_arguments)]
+    pub fn wheel(
+        &mut self,
+        fr: &Frame,
+        fwd: f32,
+        left: f32,
+        r: f32,
+        hw: f32,
+        n: usize,
+        outward: f32,
+        tyre: [u8; 3],
+        hub: [u8; 3],
+    ) {
+        let start = self.out.len();
+        let at = |i: usize, side: f32| {
+            let a = std::f32::consts::TAU * (i as f32 + 0.5) / n as f32;
+            fr.pt(fwd + r * a.cos(), left + side * hw, r + r * a.sin())
+        };
+        let centre = fr.pt(fwd, left, r);
+        for i in 0..n {
+            let (a0, a1, b0, b1) = (at(i, 1.0), at(i + 1, 1.0), at(i, -1.0), at(i + 1, -1.0));
+            self.quad(a0, a1, b1, b0, centre, tyre, false);
+        }
+        // Outer side disc (the tyre as an n-gon, the hub a smaller one 1 cm proud of it); the
+        // inner side faces the body and is never seen, so it is not drawn.
+        let side = fr.offset(fwd, left, std::f32::consts::FRAC_PI_2);
+        let face = if outward >= 0.0 {
+            side
+        } else {
+            Frame { o: side.o, f: [-side.f[0], -side.f[1]], l: [-side.l[0], -side.l[1]] }
+        };
+        let rot = std::f32::consts::PI / n as f32;
+        self.plate(&face, hw, 0.0, r, r, n, rot, tyre, false);
+        self.plate(&face, hw + 0.01, 0.0, r, r * 0.55, n, rot, hub, false);
+        if outward == 0.0 {
+            for t in &mut self.out[start..] {
+                t.two_sided = true;
+            }
+        }
+    }
+}
+
 /// Default footprint and height when a view gives zeros.
 pub(crate) fn actor_dims(a: &ActorView) -> (f32, f32, f32) {
     let (l, w, h) = match a.kind {
@@ -306,93 +399,40 @@ pub(crate) fn actor_dims(a: &ActorView) -> (f32, f32, f32) {
     (pick(a.length_m, l), pick(a.width_m, w), pick(a.height_m, h))
 }
 
-/// Appends the triangles of one actor.
-pub(crate) fn actor(out: &mut Vec<Tri3>, a: &ActorView, origin: Vec2, id: u32) {
+/// Appends the triangles of one actor; `detail` = near the camera (rounder wheels).
+pub(crate) fn actor(out: &mut Vec<Tri3>, a: &ActorView, origin: Vec2, id: u32, detail: bool) {
     let fr = Frame::new(a.pose.pos, a.pose.yaw, origin, 0.0);
     let (l, w, h) = actor_dims(a);
     let (hl, hw) = (l * 0.5, w * 0.5);
     let col = a.color;
-    let mut m = Mesh { out, id };
+    let mut m = Mesh { out, id, paint: Some(a.color) };
     match a.kind {
-        ActorKind::Car => {
-            let r = (h * 0.22).clamp(0.25, 0.4);
-            wheels(&mut m, &fr, hl, hw, r, &[hl - 0.85 - r * 0.5, -hl + 0.85 + r * 0.5]);
-            let zb = h * 0.55;
-            m.tbox(&fr, 0.0, 0.0, r * 0.7, zb, [hl, hl, hw], [hl - 0.1, hl - 0.05, hw], &all(col));
-            // Cabin: sloped windshield and rear window, roof in body colour.
-            let cab = [scale(col, 0.95), col, GLASS, GLASS, GLASS, GLASS];
-            m.tbox(
-                &fr,
-                -0.25 * hl,
-                0.0,
-                zb,
-                h,
-                [0.55 * hl, 0.55 * hl, hw * 0.92],
-                [0.28 * hl, 0.42 * hl, hw * 0.82],
-                &cab,
-            );
-            lights(&mut m, &fr, hl - 0.05, hw, zb - 0.15, a.braking, a.blinkers);
+        ActorKind::Car | ActorKind::Bus | ActorKind::Truck => {
+            super::vehicles::vehicle(&mut m, &fr, a, l, w, h, detail);
         }
-        ActorKind::Bus => {
-            let r = 0.5;
-            wheels(&mut m, &fr, hl, hw, r, &[hl - 2.6, -hl + 3.2]);
-            m.bx(&fr, 0.0, 0.0, r * 0.6, h * 0.5, hl, hw, &all(col));
-            m.bx(
-                &fr,
-                0.0,
-                0.0,
-                h * 0.5,
-                h * 0.86,
-                hl - 0.02,
-                hw - 0.02,
-                &[col, col, GLASS, GLASS, GLASS, GLASS],
-            );
-            m.bx(&fr, 0.0, 0.0, h * 0.86, h, hl, hw, &all(scale(col, 1.05)));
-            lights(&mut m, &fr, hl, hw, h * 0.3, a.braking, a.blinkers);
-        }
-        ActorKind::Truck => {
-            let r = 0.5;
-            let cab_l = 2.3f32.min(l * 0.4);
-            wheels(&mut m, &fr, hl, hw, r, &[hl - 1.2, -hl + 1.4, -hl + 2.6]);
-            let cab_c = hl - cab_l * 0.5;
-            let cab_col = scale(col, 0.8);
-            m.bx(&fr, cab_c, 0.0, r * 0.6, h * 0.45, cab_l * 0.5, hw, &all(cab_col));
-            m.tbox(
-                &fr,
-                cab_c,
-                0.0,
-                h * 0.45,
-                h * 0.85,
-                [cab_l * 0.5, cab_l * 0.5, hw],
-                [cab_l * 0.5 - 0.25, cab_l * 0.5, hw - 0.05],
-                &[cab_col, cab_col, GLASS, GLASS, cab_col, GLASS],
-            );
-            let box_l = l - cab_l - 0.2;
-            m.bx(&fr, -hl + box_l * 0.5, 0.0, r * 1.4, h, box_l * 0.5, hw, &all(scale(col, 1.15)));
-            lights(&mut m, &fr, hl, hw, r * 1.6, a.braking, a.blinkers);
-        }
-        ActorKind::Motorcycle | ActorKind::Cyclist => {
-            let moto = a.kind == ActorKind::Motorcycle;
-            let r = if moto { 0.32 } else { 0.34 };
+        ActorKind::Cyclist => super::people::cyclist(&mut m, &fr, a, l, h),
+        ActorKind::Pedestrian => super::people::pedestrian(&mut m, &fr, a, h),
+        ActorKind::Motorcycle => {
+            let r = 0.32;
             let wb = (hl - r).max(0.3);
             for x in [wb, -wb] {
-                m.bx(&fr, x, 0.0, 0.0, 2.0 * r, r, if moto { 0.08 } else { 0.04 }, &all(TYRE));
+                m.wheel(&fr, x, 0.0, r, 0.07, if detail { 10 } else { 6 }, 0.0, TYRE, [120, 120, 125]);
             }
-            let frame_col = if moto { col } else { [60, 60, 66] };
-            m.bx(
+            // Tank and seat in the body colour over a dark engine block, forks to the front.
+            m.bx(&fr, 0.0, 0.0, r * 0.6, r + 0.3, wb * 0.45, 0.16, &all([45, 45, 48]));
+            m.tbox(
                 &fr,
+                0.05,
                 0.0,
-                0.0,
-                r,
-                r + if moto { 0.45 } else { 0.12 },
-                wb * 0.8,
-                if moto { 0.18 } else { 0.04 },
-                &all(frame_col),
+                r + 0.3,
+                r + 0.55,
+                [wb * 0.55, wb * 0.8, 0.17],
+                [wb * 0.3, wb * 0.8, 0.14],
+                &all(col),
             );
-            rider(&mut m, &fr, -0.15, r + 0.25, h, if moto { [30, 30, 30] } else { col }, true);
-        }
-        ActorKind::Pedestrian => {
-            rider(&mut m, &fr, 0.0, 0.0, h, col, false);
+            m.strut(&fr, [wb, 0.0, r], [wb - 0.2, 0.0, r + 0.65], 0.04, 0.1, [60, 60, 64]);
+            lights(&mut m, &fr, hl - 0.2, hw + 0.1, r + 0.45, a.braking, a.blinkers);
+            rider(&mut m, &fr, -0.15, r + 0.35, h, [30, 30, 30], true);
         }
         ActorKind::Cone => {
             let orange = [255, 110, 20];
@@ -489,7 +529,7 @@ pub(crate) fn signal(
     pole_right: Option<f32>,
     lit_visible: bool,
 ) {
-    let mut m = Mesh { out, id: 0 };
+    let mut m = Mesh { out, id: 0, paint: None };
     let dark = [28, 28, 30];
     let hh = LAMP_R * 3.6;
     m.bx(fr, 0.0, 0.0, z - hh, z + hh, 0.2, LAMP_R + 0.12, &all(dark));
@@ -510,7 +550,7 @@ pub(crate) fn signal(
 
 /// A sign on a post; its face looks along `fr.f`.
 pub(crate) fn sign(out: &mut Vec<Tri3>, fr: &Frame, kind: SignKind) {
-    let mut m = Mesh { out, id: 0 };
+    let mut m = Mesh { out, id: 0, paint: None };
     let z = 2.2;
     m.bx(fr, -0.05, 0.0, 0.0, z, 0.04, 0.04, &all([150, 150, 155]));
     let red = [210, 20, 25];
@@ -538,7 +578,7 @@ pub(crate) fn sign(out: &mut Vec<Tri3>, fr: &Frame, kind: SignKind) {
 
 /// A tree: trunk and a two-tier crown.
 pub(crate) fn tree(out: &mut Vec<Tri3>, fr: &Frame, height: f32, crown: f32, shade_k: f32) {
-    let mut m = Mesh { out, id: 0 };
+    let mut m = Mesh { out, id: 0, paint: None };
     m.bx(fr, 0.0, 0.0, 0.0, height * 0.4, 0.15, 0.15, &all([90, 65, 40]));
     let g = scale([60, 120, 50], shade_k);
     m.tbox(fr, 0.0, 0.0, height * 0.35, height * 0.75, [crown * 0.7; 3], [crown; 3], &all(g));
@@ -547,7 +587,7 @@ pub(crate) fn tree(out: &mut Vec<Tri3>, fr: &Frame, height: f32, crown: f32, sha
 
 /// A building block with window bands.
 pub(crate) fn building(out: &mut Vec<Tri3>, fr: &Frame, hl: f32, hw: f32, height: f32, col: [u8; 3]) {
-    let mut m = Mesh { out, id: 0 };
+    let mut m = Mesh { out, id: 0, paint: None };
     m.bx(fr, 0.0, 0.0, 0.0, height, hl, hw, &[col, scale(col, 0.7), col, col, col, col]);
     // Window bands on all four sides, 5 cm proud of the wall.
     let win = [70, 90, 115];

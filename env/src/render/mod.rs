@@ -18,9 +18,12 @@ mod gallery;
 mod image;
 mod map;
 mod mesh;
+pub mod palette;
+mod people;
 mod raster;
 #[cfg(test)]
 mod record;
+mod vehicles;
 mod video;
 
 pub use bev::BevConfig;

@@ -200,6 +200,10 @@ pub(crate) trait RasterBackend {
     /// 0 = none) for the projection helper.
     fn fill_convex_depth(&mut self, pts: &[SV], col: [u8; 3], id: u32);
 
+    /// Darkens the pixels a convex polygon covers to `k / 256` of their colour (shadows on the
+    /// ground), fanned from its first vertex, without depth. Backends that cannot blend skip it.
+    fn darken_convex(&mut self, _pts: &[SV], _k: u16) {}
+
     /// A thick segment a→b with square (butt) ends, half width `hw`.
     fn stroke_segment(&mut self, a: SV, b: SV, hw: f32, col: [u8; 3]) {
         let (dx, dy) = (b.x - a.x, b.y - a.y);
@@ -326,6 +330,21 @@ impl RasterBackend for SoftwareRaster {
         let mut t = self.target();
         for k in 1..pts.len() - 1 {
             fill_flat(&mut t, pts[0], pts[k], pts[k + 1], &pat);
+        }
+    }
+
+    fn darken_convex(&mut self, pts: &[SV], k: u16) {
+        if pts.len() < 3 {
+            return;
+        }
+        let (w, k) = (self.width, k as u32);
+        for i in 1..pts.len() - 1 {
+            let rgb = &mut self.rgb;
+            for_spans(pts[0], pts[i], pts[i + 1], self.width, self.height, |y, x0, x1| {
+                for c in &mut rgb[(y * w + x0) * 3..(y * w + x1) * 3] {
+                    *c = ((*c as u32 * k) >> 8) as u8;
+                }
+            });
         }
     }
 

@@ -234,13 +234,14 @@ fn camera_paints_ground_before_depth_tested_actors_tagged_with_their_ids() {
     let ids: Vec<u32> = p
         .iter()
         .filter_map(|q| match q {
-            Prim::ConvexDepth { id, .. } if *id != 0 => Some(*id),
+            // Ids carry the paint flag on body-colour faces; the actor is the rest.
+            Prim::ConvexDepth { id, .. } if *id != 0 => Some(*id & !super::mesh::PAINT_BIT),
             _ => None,
         })
         .collect();
     assert!(!ids.is_empty() && ids.iter().all(|i| *i == 1), "{ids:?}");
     let bb = p.iter().fold([f32::MAX, f32::MAX, f32::MIN, f32::MIN], |b, q| match q {
-        Prim::ConvexDepth { id: 1, bbox, .. } => {
+        Prim::ConvexDepth { id, bbox, .. } if *id & !super::mesh::PAINT_BIT == 1 => {
             [b[0].min(bbox[0]), b[1].min(bbox[1]), b[2].max(bbox[2]), b[3].max(bbox[3])]
         }
         _ => b,

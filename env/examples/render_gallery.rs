@@ -1,0 +1,179 @@
+//! The rendering gallery of docs/rendering.md: people walking and standing at 10/25/40 m, each
+//! vehicle body at 15 and 60 m, every palette colour, and a curved road's markings, all on
+//! town01 through the protocol's 800×450 front camera (what a model sees, no supersampling).
+//! Next to each frame it writes a ×4 nearest-neighbour crop around the subject, so a reviewer
+//! sees the actual pixels.
+//!
+//! `cargo run --release -p dh-env --example render_gallery -- scenarios/maps/town01/town01.net.xml docs/gallery/look`
+//!
+//! Prints the Markdown that embeds the images (paths relative to docs/).
+
+use dh_env::geom::Pose;
+use dh_env::map::Network;
+use dh_env::render::palette::PALETTE;
+use dh_env::render::{render_and_project, render_bev, BevConfig, CameraConfig, FrameInput, Image, RenderMap};
+use dh_env::view::{ActorKind, ActorView};
+use std::f64::consts::{FRAC_PI_2, PI};
+use std::path::{Path, PathBuf};
+
+fn view(id: u32, kind: ActorKind, pose: Pose, color: [u8; 3]) -> ActorView {
+    ActorView {
+        id,
+        kind,
+        pose,
+        speed_mps: 0.0,
+        length_m: 0.0,
+        width_m: 0.0,
+        height_m: 0.0,
+        color,
+        braking: false,
+        blinkers: 0,
+    }
+}
+
+/// Nearest-neighbour crop of `img` around `bbox` (padded, at least `min` px square), scaled ×k.
+fn zoom(img: &Image, bbox: [f32; 4], k: u32, min: u32) -> Image {
+    let (cx, cy) = ((bbox[0] + bbox[2]) * 0.5, (bbox[1] + bbox[3]) * 0.5);
+    let side = ((bbox[2] - bbox[0]).max(bbox[3] - bbox[1]) * 1.5).max(min as f32) as u32;
+    let x0 = (cx - side as f32 * 0.5).clamp(0.0, (img.width - side.min(img.width)) as f32) as u32;
+    let y0 = (cy - side as f32 * 0.5).clamp(0.0, (img.height - side.min(img.height)) as f32) as u32;
+    let (w, h) = (side.min(img.width), side.min(img.height));
+    let mut out = Image::new(w * k, h * k);
+    for y in 0..h * k {
+        for x in 0..w * k {
+            let p = img.pixel(x0 + x / k, y0 + y / k).unwrap_or([0, 0, 0]);
+            let o = ((y * w * k + x) * 3) as usize;
+            out.data[o..o + 3].copy_from_slice(&p);
+        }
+    }
+    out
+}
+
+struct Shot<'a> {
+    map: &'a RenderMap,
+    dir: PathBuf,
+    md: Vec<String>,
+}
+
+impl Shot<'_> {
+    /// Renders the front camera (and optionally the BEV) of `ego` with `actors`; writes a zoom of
+    /// actor `subject` when it is in view. Returns the Markdown cell.
+    fn take(
+        &mut self,
+        name: &str,
+        ego: &ActorView,
+        actors: &[ActorView],
+        subject: Option<u32>,
+        bev: bool,
+    ) -> String {
+        let frame = FrameInput { ego, actors, lights: &[], signs: &[], route_points: &[] };
+        let mut img = Image::default();
+        let found = render_and_project(self.map, &frame, &CameraConfig::front(), &mut img).unwrap();
+        let file = format!("{name}.png");
+        img.save(self.dir.join(&file)).unwrap();
+        let rel = format!("gallery/look/{file}");
+        let mut cell = format!("![{name}]({rel})");
+        if let Some(id) = subject {
+            if let Some(p) = found.iter().find(|p| p.id == id && p.pixel_count > 0) {
+                let z = zoom(&img, p.bbox_px, 4, 48);
+                let zf = format!("{name}_zoom.png");
+                z.save(self.dir.join(&zf)).unwrap();
+                cell += &format!(" ![{name} ×4](gallery/look/{zf})");
+            }
+        }
+        if bev {
+            render_bev(self.map, &frame, &BevConfig::default(), &mut img).unwrap();
+            let bf = format!("{name}_bev.png");
+            img.save(self.dir.join(&bf)).unwrap();
+            cell += &format!(" ![{name} BEV](gallery/look/{bf})");
+        }
+        cell
+    }
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().collect();
+    if args.len() < 3 {
+        return Err("usage: render_gallery TOWN01_NET OUT_DIR".into());
+    }
+    let net = Network::from_file(Path::new(&args[1]))?;
+    let map = RenderMap::build(&net);
+    let dir = PathBuf::from(&args[2]);
+    std::fs::create_dir_all(&dir)?;
+    let mut shot = Shot { map: &map, dir, md: Vec::new() };
+
+    let lane = net.lane_by_id("W2C_1").ok_or("town01 has no lane W2C_1")?;
+    let ego_pose = net.lane_position(lane, net.lanes[lane].shape.length() - 75.0);
+    let ego = view(0, ActorKind::Car, ego_pose, [30, 110, 230]);
+    let at = |f: f64, l: f64, dyaw: f64| Pose::new(ego_pose.local_to_world(f, l), ego_pose.yaw + dyaw);
+
+    // People: walking across the lane (from the right) and standing at the kerb, facing the road.
+    shot.md.push("### People\n\n| distance | walking (1.4 m/s) | standing |\n|---|---|---|".into());
+    for d in [10.0, 25.0, 40.0] {
+        let mut walker = view(1, ActorKind::Pedestrian, at(d, -1.2, FRAC_PI_2), [200, 32, 32]);
+        walker.speed_mps = 1.4;
+        let stander = view(2, ActorKind::Pedestrian, at(d, -4.6, FRAC_PI_2), [36, 88, 204]);
+        let w = shot.take(&format!("pedestrian_walking_{d}m"), &ego, &[walker], Some(1), false);
+        let s = shot.take(&format!("pedestrian_standing_{d}m"), &ego, &[stander], Some(2), false);
+        shot.md.push(format!("| {d} m | {w} | {s} |"));
+    }
+    // A child and an adult walking side by side, a cyclist crossing, a cyclist riding ahead.
+    let mut adult = view(3, ActorKind::Pedestrian, at(14.0, -2.0, FRAC_PI_2), [240, 128, 24]);
+    adult.speed_mps = 1.2;
+    let mut child = view(4, ActorKind::Pedestrian, at(14.0, -1.2, FRAC_PI_2), [226, 190, 30]);
+    child.speed_mps = 1.2;
+    child.height_m = 1.15;
+    let c1 = shot.take("adult_and_child_14m", &ego, &[adult, child], Some(4), false);
+    let mut bike = view(5, ActorKind::Cyclist, at(15.0, 0.5, -FRAC_PI_2), [40, 150, 68]);
+    bike.speed_mps = 4.0;
+    let c2 = shot.take("cyclist_crossing_15m", &ego, &[bike], Some(5), false);
+    let mut bike2 = view(6, ActorKind::Cyclist, at(25.0, -1.0, 0.0), [138, 58, 160]);
+    bike2.speed_mps = 5.0;
+    let c3 = shot.take("cyclist_ahead_25m", &ego, &[bike2], Some(6), false);
+    shot.md.push(format!("\n| adult and child, 14 m | cyclist crossing, 15 m | cyclist ahead, 25 m |\n|---|---|---|\n| {c1} | {c2} | {c3} |"));
+
+    // Vehicles: rear three-quarter view in the ego lane (15 m, braking) and head-on in the
+    // oncoming lane (60 m).
+    shot.md.push("\n### Vehicles\n\n| body | 15 m, ahead, braking | 60 m, oncoming |\n|---|---|---|".into());
+    let bodies: [(&str, ActorKind, f64, f64, f64, [u8; 3]); 5] = [
+        ("sedan", ActorKind::Car, 4.6, 1.85, 1.45, [200, 32, 32]),
+        ("suv", ActorKind::Car, 4.8, 1.95, 1.75, [166, 167, 169]),
+        ("van", ActorKind::Car, 5.4, 2.05, 2.35, [240, 240, 238]),
+        ("bus", ActorKind::Bus, 12.0, 2.55, 3.2, [226, 190, 30]),
+        ("truck", ActorKind::Truck, 8.0, 2.5, 3.4, [122, 74, 38]),
+    ];
+    for (name, kind, l, w, h, col) in bodies {
+        let mut v = view(7, kind, at(15.0 + l * 0.5, -0.6, 0.25), col);
+        (v.length_m, v.width_m, v.height_m, v.braking) = (l, w, h, true);
+        let near = shot.take(&format!("{name}_15m"), &ego, &[v], Some(7), false);
+        let mut o = view(8, kind, at(60.0, 3.3, PI), col);
+        (o.length_m, o.width_m, o.height_m) = (l, w, h);
+        let far = shot.take(&format!("{name}_60m"), &ego, &[o], Some(8), false);
+        shot.md.push(format!("| {name} | {near} | {far} |"));
+    }
+
+    // Every palette colour on a sedan at 12 m, rear three-quarter view.
+    shot.md.push("\n### Palette (sedan at 12 m)\n".into());
+    let mut row = Vec::new();
+    for (i, c) in PALETTE.iter().enumerate() {
+        let v = view(20 + i as u32, ActorKind::Car, at(12.0, -1.0, 0.5), c.rgb);
+        let cell = shot.take(&format!("palette_{}", c.name), &ego, &[v], None, false);
+        row.push(format!("{} {}", c.name, cell));
+    }
+    shot.md.push(row.join("\n\n"));
+
+    // Curved road markings (town01 bend on T2R) with traffic, front and BEV.
+    let bend = net.lane_by_id("T2R_0").ok_or("town01 has no lane T2R_0")?;
+    let bp = net.lane_position(bend, 150.0);
+    let bego = view(0, ActorKind::Car, bp, [30, 110, 230]);
+    let bat = |f: f64, l: f64| {
+        let p = net.lane_position(bend, 150.0 + f);
+        Pose::new(p.local_to_world(0.0, l), p.yaw)
+    };
+    let lead = ActorView { braking: true, ..view(9, ActorKind::Car, bat(22.0, 0.0), [36, 88, 204]) };
+    let c = shot.take("curve_markings", &bego, &[lead], None, true);
+    shot.md.push(format!("\n### Curved road\n\n{c}"));
+
+    println!("{}", shot.md.join("\n"));
+    Ok(())
+}
