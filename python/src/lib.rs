@@ -9,8 +9,8 @@ mod errors;
 mod facts;
 mod json;
 mod network;
-mod sumo_home;
 mod render_facts;
+mod sumo_home;
 mod sumo_native;
 mod traffic;
 

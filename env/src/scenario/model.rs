@@ -8,7 +8,7 @@ use crate::view::{ActorKind, SignView};
 use std::path::PathBuf;
 use std::sync::Arc;
 
-/// Protocol fallback speed for the reference duration when a scenario gives none (§2.5).
+/// Protocol fallback speed for the reference duration when a scenario gives none (docs/protocol.md#r4-scene-score).
 pub const DEFAULT_REFERENCE_SPEED_MPS: f64 = 5.56;
 /// Fixed palette; actor `i` (file order, obstacles after actors) gets `PALETTE[i % 8]`.
 pub const PALETTE: [[u8; 3]; 8] = [
@@ -34,7 +34,7 @@ pub struct ResolvedEgo {
     pub start_lane: LaneIdx,
     /// Normal edges of the route, start edge first.
     pub route_edges: Vec<EdgeIdx>,
-    /// Route centreline clipped between the projections of start and destination (§2.5 L).
+    /// Route centreline clipped between the projections of start and destination (L of docs/protocol.md#r4-scene-score).
     pub route: Polyline,
     pub destination: Vec2,
 }
@@ -238,12 +238,12 @@ impl ResolvedScenario {
     pub fn route_length_m(&self) -> f64 {
         self.ego.route.length()
     }
-    /// T_ref of §2.5: the scenario's value, else L / 5.56 m/s.
+    /// T_ref of docs/protocol.md#r4-scene-score: the scenario's value, else L / 5.56 m/s.
     pub fn reference_duration_s(&self) -> f64 {
         self.reference_duration_given_s.unwrap_or(self.route_length_m() / DEFAULT_REFERENCE_SPEED_MPS)
     }
 
-    /// The scenario duration of §2.4 (the scenario timeout is 2 × it): the file's `duration_s`,
+    /// The scenario duration of docs/protocol.md#r4-termination (the scenario timeout is 2 × it): the file's `duration_s`,
     /// else — like the original's "longest estimated duration over all actors, ego included" —
     /// the largest of T_ref and every scripted actor's estimated finish time (start trigger +
     /// travel time of its legs + any brake hold). An ego-distance trigger is estimated to fire
