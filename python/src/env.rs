@@ -226,7 +226,8 @@ impl PySim {
         Ok(d)
     }
 
-    /// Actors visible to a camera: id, bbox_px, center_px, distance_m, visible_fraction, pixel_count.
+    /// Actors visible to a camera: id, bbox_px, center_px, distance_m, visible_fraction, pixel_count,
+    /// visible_rgb.
     fn project_actors<'py>(&self, py: Python<'py>, config_json: &str) -> PyResult<Bound<'py, PyList>> {
         let cam: CameraConfig = parse_json(py, "camera", config_json)?;
         cam.validate().map_err(|e| err(py, e))?;
@@ -418,6 +419,7 @@ fn projected_to_py<'py>(
         d.set_item("distance_m", a.distance_m)?;
         d.set_item("visible_fraction", a.visible_fraction)?;
         d.set_item("pixel_count", a.pixel_count)?;
+        d.set_item("visible_rgb", a.visible_rgb.to_vec())?;
         out.append(d)?;
     }
     Ok(out)

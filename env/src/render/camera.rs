@@ -159,6 +159,9 @@ pub struct ProjectedActor {
     /// Silhouette pixels, those cut off by the image border included (the in-image count
     /// scaled by the projected area's in-image share).
     pub pixel_count: u32,
+    /// Per-channel median colour of the unoccluded pixels as rendered (lit, shaded, fogged);
+    /// [0, 0, 0] when none is unoccluded.
+    pub visible_rgb: [u8; 3],
 }
 
 const NEAR: f32 = 0.1;
@@ -533,6 +536,8 @@ impl Renderer {
             }
             let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
             let mut visible = 0usize;
+            // Per-channel histograms of the actor's unoccluded pixels (the colour the image shows).
+            let mut hist = [[0u32; 256]; 3];
             for y in 0..h {
                 let row = &mask[y * w..(y + 1) * w];
                 if !row.contains(&stamp) {
@@ -546,6 +551,9 @@ impl Renderer {
                         y1 = y1.max(y + 1);
                         if ids[y * w + x] == stamp {
                             visible += 1;
+                            for (k, hk) in hist.iter_mut().enumerate() {
+                                hk[self.ss[(y * w + x) * 3 + k] as usize] += 1;
+                            }
                         }
                     }
                 }
@@ -563,6 +571,7 @@ impl Renderer {
                 distance_m: a.pose.pos.dist(frame.ego.pose.pos),
                 visible_fraction: visible as f32 / whole as f32,
                 pixel_count: whole as u32,
+                visible_rgb: hist.map(|hk| median(&hk, visible)),
             });
         }
         self.tris = tris;
@@ -593,6 +602,18 @@ impl Renderer {
         }
         Ok(found)
     }
+}
+
+/// Median of `n` values given as a 256-bin histogram.
+fn median(hist: &[u32; 256], n: usize) -> u8 {
+    let mut acc = 0usize;
+    for (v, c) in hist.iter().enumerate() {
+        acc += *c as usize;
+        if n > 0 && 2 * acc >= n {
+            return v as u8;
+        }
+    }
+    0
 }
 
 /// Area of a screen triangle, pixels².
