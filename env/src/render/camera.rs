@@ -11,6 +11,7 @@ use super::map::{Mat, RenderMap, N_LAYERS, N_MATS};
 use super::mesh::{self, dot, Frame, Tri3};
 use super::raster::{fill_mask, Planes, RasterBackend, SV};
 use crate::error::{Error, Result};
+use crate::view::ActorKind;
 use serde::{Deserialize, Serialize};
 
 /// A camera rigidly mounted on the ego vehicle.
@@ -159,8 +160,9 @@ pub struct ProjectedActor {
     /// Silhouette pixels, those cut off by the image border included (the in-image count
     /// scaled by the projected area's in-image share).
     pub pixel_count: u32,
-    /// Per-channel median colour of the unoccluded pixels as rendered (lit, shaded, fogged);
-    /// [0, 0, 0] when none is unoccluded.
+    /// Per-channel median colour of the unoccluded pixels as rendered (lit, shaded, fogged) in
+    /// the rows that show the body colour (vehicles: below the windows, above the wheels;
+    /// people: the torso); [0, 0, 0] when none is unoccluded.
     pub visible_rgb: [u8; 3],
 }
 
@@ -536,8 +538,6 @@ impl Renderer {
             }
             let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
             let mut visible = 0usize;
-            // Per-channel histograms of the actor's unoccluded pixels (the colour the image shows).
-            let mut hist = [[0u32; 256]; 3];
             for y in 0..h {
                 let row = &mask[y * w..(y + 1) * w];
                 if !row.contains(&stamp) {
@@ -551,11 +551,37 @@ impl Renderer {
                         y1 = y1.max(y + 1);
                         if ids[y * w + x] == stamp {
                             visible += 1;
+                        }
+                    }
+                }
+            }
+            // The colour the image shows: per-channel median of the unoccluded pixels in the
+            // band of the silhouette's rows where the body colour is (below a vehicle's windows
+            // and above its wheels; a person's torso), all of them when the band shows few.
+            let (b0, b1) = match a.kind {
+                ActorKind::Pedestrian | ActorKind::Cyclist => (0.2, 0.5),
+                ActorKind::Car | ActorKind::Bus | ActorKind::Truck | ActorKind::Motorcycle => (0.5, 0.85),
+                _ => (0.0, 1.0),
+            };
+            let mut visible_rgb = [0u8; 3];
+            for band in [(b0, b1), (0.0, 1.0)] {
+                let (r0, r1) =
+                    (y0 + ((y1 - y0) as f32 * band.0) as usize, y0 + ((y1 - y0) as f32 * band.1) as usize);
+                let mut hist = [[0u32; 256]; 3];
+                let mut n = 0usize;
+                for y in r0..r1.max(r0 + 1).min(h) {
+                    for x in x0..x1 {
+                        if mask[y * w + x] == stamp && ids[y * w + x] == stamp {
+                            n += 1;
                             for (k, hk) in hist.iter_mut().enumerate() {
                                 hk[self.ss[(y * w + x) * 3 + k] as usize] += 1;
                             }
                         }
                     }
+                }
+                if n >= 10 || (band == (0.0, 1.0) && n > 0) {
+                    visible_rgb = hist.map(|hk| median(&hk, n));
+                    break;
                 }
             }
             let (_, _, hgt) = mesh::actor_dims(a);
@@ -571,7 +597,7 @@ impl Renderer {
                 distance_m: a.pose.pos.dist(frame.ego.pose.pos),
                 visible_fraction: visible as f32 / whole as f32,
                 pixel_count: whole as u32,
-                visible_rgb: hist.map(|hk| median(&hk, visible)),
+                visible_rgb,
             });
         }
         self.tris = tris;
