@@ -129,9 +129,12 @@ fn border_cut_pixels_count_as_hidden() {
         }
     };
     assert!(whole.visible_fraction > 0.95, "{whole:?}");
-    assert!((0.3..0.7).contains(&cut.visible_fraction), "{cut:?}");
-    let ratio = cut.pixel_count as f32 / whole.pixel_count as f32;
-    assert!((0.7..1.4).contains(&ratio), "{cut:?} vs {whole:?}");
+    // (Seen from the side at the frame's edge, the car shows more than its back: the share is an
+    // estimate from projected areas, not exactly a half.)
+    assert!((0.25..0.7).contains(&cut.visible_fraction), "{cut:?}");
+    // The whole silhouette is counted: more pixels than the in-image box could hold.
+    let [x0, y0, x1, y1] = cut.bbox_px;
+    assert!(cut.pixel_count as f32 > (x1 - x0) * (y1 - y0), "{cut:?}");
 }
 
 #[test]
