@@ -98,6 +98,30 @@ def balance_groups(
     return out
 
 
+def balance_within_classes(
+    by_class: dict[str, dict[str, list[T]]], n: int, rng: random.Random, max_share: float = 0.4
+) -> list[T]:
+    """Items balanced over the answers *within every asked class* (no answer above
+    `max_share` of its class's items, or 1/k with k answers; a class with one answer only is
+    left out: its question would give the answer away), then drawn round-robin over the classes
+    up to `n`."""
+    used: Counter[str] = Counter()
+    per_class = {}
+    for cls in sorted(by_class):
+        answers = {a: v for a, v in by_class[cls].items() if v}
+        if len(answers) < 2:
+            continue
+        total = sum(len(v) for v in answers.values())
+        per_class[cls] = balance_groups(answers, total, rng, used, max_share=max_share)
+    out: list[T] = []
+    while len(out) < n and any(per_class.values()):
+        for cls in list(per_class):
+            if per_class[cls] and len(out) < n:
+                out.append(per_class[cls].pop())
+    rng.shuffle(out)
+    return out
+
+
 def balance_binary(yes: list[T], no: list[T], n: int, rng: random.Random) -> list[T]:
     """Exactly half yes and half no (one more of one when `n` is odd)."""
     return balance_binary_by({"": (yes, no)}, n, rng)
@@ -385,7 +409,10 @@ def quality_rows(
             )
         if d["max_per_image"] > MAX_RECORDS_PER_IMAGE:
             problems.append(f"an image serves {d['max_per_image']} records")
-        if d.get("max_option_share", 0.0) > MAX_OPTION_SHARE:
+        # With k options one of them holds at least 1/k (a yes/no-like pair: a half).
+        k_min = min((len(r.get("options") or []) for r in recs), default=0)
+        allowed = max(MAX_OPTION_SHARE, 1.0 / k_min if k_min else 0.0) + 1.0 / max(1, len(recs))
+        if d.get("max_option_share", 0.0) > allowed:
             problems.append(f"one option is the answer of {100 * d['max_option_share']:.0f} % of the records")
         rows.append({"task": task, "records": len(recs), **p, **d, "problems": problems})
     return rows

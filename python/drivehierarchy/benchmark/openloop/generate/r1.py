@@ -24,9 +24,11 @@ PLURAL = {
     "Bicycle": "Bicycles",
     "Traffic Cone": "Traffic Cones",
 }
+# The sim's people never sit or lie: offering "sitting_or_lying" would only make the options
+# easier to rule out than their count says.
 STATUS_OPTIONS = {
     "Vehicle": ("moving", "parked", "stopped"),
-    "Pedestrian": ("moving", "standing", "sitting_or_lying"),
+    "Pedestrian": ("moving", "standing"),
 }
 BUCKETS = (("Near", "<20m", 0.0, 20.0), ("Mid", "20-50m", 20.0, 50.0), ("Far", ">50m", 50.0, math.inf))
 # Distances this close to a bucket edge are not asked about (the edge must be clear-cut).
@@ -61,7 +63,14 @@ def _ego_xy(m: Moment, v: Visible) -> list[float]:
 
 
 def _clear(frame: Frame, category: str) -> bool:
-    """No actor of `category` is in the dead band (so counts and existence are clear-cut)."""
+    """No actor of `category` is in the dead band (so counts and existence are clear-cut); for
+    vehicles, no motorcycle or bicycle is shown either (a person may count one as a vehicle:
+    nuScenes does; audit)."""
+    two_wheel = ("Motorcycle", "Bicycle")
+    if category == "Vehicle" and (
+        frame.blocking(two_wheel) or any(v.actor.category in two_wheel for v in frame.visible)
+    ):
+        return False
     return not frame.blocking(category)
 
 
@@ -213,7 +222,7 @@ def frame_status(m: Moment, f: Frame, v: Visible) -> str | None:
 
 @register("R1_1_C", needs=Needs())
 def r1_1_c(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str, Any]]:
-    by_status: dict[str, list[Any]] = {}
+    by_status: dict[str, dict[str, list[Any]]] = {}
     for m, f in _front_frames(moments):
         for cat, vocab in STATUS_OPTIONS.items():
             v = _nearest(f, cat)
@@ -246,8 +255,9 @@ def r1_1_c(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
                     "original_subtask_id": "L1-1-C",
                 }
             )
-            by_status.setdefault(f"{cat}:{status}", []).append((rec, [f]))
-    chosen = quality.balance_groups(by_status, n, rng, max_share=quality.MAX_OPTION_SHARE)
+            by_status.setdefault(cat, {}).setdefault(status, []).append((rec, [f]))
+    # Balanced within each asked class: the class must not give the status away.
+    chosen = quality.balance_within_classes(by_status, n, rng, max_share=quality.MAX_OPTION_SHARE)
     recs = [c[0] for c in chosen]
     quality.letter_options(recs, rng, answer_style="letter")
     return _finish(recs, "R1_1_C", [c[1] for c in chosen])
@@ -382,14 +392,19 @@ def _region(f: Frame, v: Visible) -> str:
     return "on the left side" if u < 0.38 else ("on the right side" if u > 0.62 else "in the middle")
 
 
-def _motion_phrase(m: Moment, v: Visible) -> str:
+def _motion_phrase(m: Moment, f: Frame, v: Visible) -> str | None:
+    """What one frame shows of how the object moves, or None when it shows nothing clear (a
+    slow or stopped vehicle whose lamps the camera cannot see, a person at a shuffle)."""
     a = v.actor
     if a.category == "Pedestrian":
-        return "walking" if a.moving else "standing still"
-    if a.status == "parked":
-        return "parked"
-    if not a.moving:
-        return "stopped"
+        if a.speed_mps >= PED_WALKING_MPS:
+            return "walking"
+        return "standing still" if a.speed_mps <= STILL_MPS else None
+    status = frame_status(m, f, v) if a.category == "Vehicle" else None
+    if status in ("parked", "stopped"):
+        return status
+    if a.speed_mps < CLEARLY_MOVING_MPS:
+        return None
     rel = (a.yaw - m.ego.yaw + math.pi) % (2 * math.pi) - math.pi
     if abs(rel) < math.pi / 4:
         return "driving in the same direction as the ego car"
@@ -398,24 +413,49 @@ def _motion_phrase(m: Moment, v: Visible) -> str:
     return "crossing from left to right" if rel < 0 else "crossing from right to left"
 
 
-def describe(m: Moment, f: Frame, v: Visible) -> str:
-    noun = {"Pedestrian": "pedestrian", "Bicycle": "cyclist", "Traffic Cone": "traffic cone"}.get(
+def _noun_r13(v: Visible) -> str:
+    return {"Pedestrian": "pedestrian", "Bicycle": "cyclist", "Traffic Cone": "traffic cone"}.get(
         v.actor.category, v.actor.subtype
     )
+
+
+def _article(word: str) -> str:
+    return "an" if word[:1] in "aeiou" else "a"
+
+
+def describe(m: Moment, f: Frame, v: Visible) -> str | None:
+    """The referring description of `v` (colour as the image shows it, where known), or None
+    when the frame shows nothing clear of its motion."""
+    motion = _motion_phrase(m, f, v)
+    if motion is None:
+        return None
     colour = "" if v.actor.category == "Pedestrian" or not v.colour else f"{v.colour} "
+    words = f"{colour}{_noun_r13(v)}"
     where = f"{_region(f, v)} of the image, ahead of the ego car"
-    return f"There is a {colour}{noun} {_motion_phrase(m, v)}, {where}."
+    return f"There is {_article(words)} {words} {motion}, {where}."
+
+
+def _could_be(m: Moment, f: Frame, target: Visible, other: Visible) -> bool:
+    """Whether `other` also fits `target`'s description (an unnamed colour or an unclear motion
+    fits any)."""
+    if _noun_r13(other) != _noun_r13(target) or _region(f, other) != _region(f, target):
+        return False
+    if target.colour and other.colour and target.colour != other.colour:
+        return False
+    mo = _motion_phrase(m, f, other)
+    return mo is None or mo == _motion_phrase(m, f, target)
 
 
 @register("R1_3", needs=Needs())
 def r1_3(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str, Any]]:
-    groups: dict[str, list[Any]] = {}
+    by_desc: dict[str, list[Any]] = {}
     for m, f in _front_frames(moments):
-        descs = {v.actor.id: describe(m, f, v) for v in f.visible}
         for v in f.visible:
             if v.actor.category not in ("Vehicle", "Pedestrian", "Bicycle", "Motorcycle"):
                 continue
-            d = descs[v.actor.id]
+            d = describe(m, f, v)
+            if d is None:
+                continue
             # The description must single the object out among everything shown, and the box
             # (the whole silhouette) must be mostly unoccluded.
             bw, bh = v.bbox[2] - v.bbox[0], v.bbox[3] - v.bbox[1]
@@ -423,7 +463,7 @@ def r1_3(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str
                 v.visible_fraction < 0.8
                 or min(bw, bh) < MIN_BOX_PX
                 or v.distance_m > MAX_TARGET_M
-                or list(descs.values()).count(d) != 1
+                or any(o is not v and _could_be(m, f, v, o) for o in f.visible)
                 or f.blocking(("Vehicle", "Pedestrian", "Bicycle", "Motorcycle"))
             ):
                 continue
@@ -450,7 +490,12 @@ def r1_3(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str
                 "refined_subtask_id": "R1-3",
                 "original_subtask_id": "L1-3",
             }
-            groups.setdefault(v.actor.category, []).append((rec, [f]))
+            by_desc.setdefault(d, []).append((rec, [f]))
+    # No two records share a description: one (seeded) candidate per description.
+    groups: dict[str, list[Any]] = {}
+    for d in sorted(by_desc):
+        rec, fr = by_desc[d][rng.randrange(len(by_desc[d]))]
+        groups.setdefault(rec["meta_data"]["agent_type"], []).append((rec, fr))
     chosen = quality.balance_groups(groups, n, rng)
     return _finish([c[0] for c in chosen], "R1_3", [c[1] for c in chosen])
 

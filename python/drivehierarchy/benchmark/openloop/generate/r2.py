@@ -51,6 +51,7 @@ R2_3_QUESTION = (
 # frames half a second apart a person cannot tell them.
 CLEARLY_MOVING_MPS = 1.0
 CLEARLY_STILL_MPS = 0.1
+R2_2_B_MAX_SHARE = 0.3
 STATES = {"Vehicle": ("moving", "stopped", "parked"), "Pedestrian": ("moving", "standing", "sitting/lying")}
 ATTRIBUTE = {"sitting/lying": "sitting_lying_down"}
 # Relations: sector centre (degrees, counter-clockwise from the ego's forward axis), name.
@@ -322,7 +323,8 @@ def build_r2_2_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[
         first = full[0]
         for target in first.visible:
             cat = target.actor.category
-            if cat not in STATES:
+            # A far speck's state change is not something a person can see (audit, issue 33).
+            if cat not in STATES or target.distance_m > RELATION_MAX_DISTANCE_M:
                 continue
             point = unique_point(first, target)
             if point is None:
@@ -396,9 +398,16 @@ def build_r2_2_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[
                 "_frames": clip,
             }
             cands.append((rec, answer))
-    picked = _balance_by(cands, n, rng)
-    from .quality import letter_options
+    # Balanced within each asked class (the class is in the question).
+    from .quality import balance_within_classes, letter_options
 
+    by: dict[str, dict[str, list[Any]]] = {}
+    for rec, answer in cands:
+        cls = rec["meta_data"]["start_attribute"].split(".")[0]
+        by.setdefault(cls, {}).setdefault(answer, []).append((rec,))
+    # Tighter than the task-wide cap: a question's region words would otherwise let a text-only
+    # rule pick the commonest state per region.
+    picked = [c[0] for c in balance_within_classes(by, n, rng, max_share=R2_2_B_MAX_SHARE)]
     letter_options(picked, rng, answer_style="option")
     return _finish(
         picked, "R2_1_C_{}", "L2_1_C_{}", refined_subtask_id="R2-1-C", original_subtask_id="L2-1-C"
