@@ -419,7 +419,7 @@ fn projected_to_py<'py>(
         d.set_item("distance_m", a.distance_m)?;
         d.set_item("visible_fraction", a.visible_fraction)?;
         d.set_item("pixel_count", a.pixel_count)?;
-        d.set_item("visible_rgb", a.visible_rgb.to_vec())?;
+        d.set_item("visible_rgb", a.visible_rgb.map(u32::from).to_vec())?;
         out.append(d)?;
     }
     Ok(out)
