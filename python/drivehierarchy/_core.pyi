@@ -1,6 +1,6 @@
 """Hand-written contract of the Rust extension module (checked by `mypy.stubtest`)."""
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from os import PathLike
 from typing import Any, Final, TypedDict, final
 
@@ -272,7 +272,7 @@ def openloop_score_answer(
     task_id: str, ground_truth: object, prediction: str, strict_order: bool = False
 ) -> tuple[float, bool]: ...
 def openloop_score_task(
-    task_id: str, records: list[Mapping[str, Any]], predictions: list[str], strict_order: bool = False
+    task_id: str, records: Sequence[Mapping[str, Any]], predictions: list[str], strict_order: bool = False
 ) -> tuple[list[float], list[bool]]: ...
 def openloop_score_file(
     path: str | PathLike[str],

@@ -9,4 +9,5 @@ mod expert_r4;
 mod expert_tongji;
 mod expert_town01;
 mod expert_unit;
+mod lateral_motion;
 mod vlm_props;

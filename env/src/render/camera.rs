@@ -11,7 +11,7 @@ use super::map::{Mat, RenderMap, N_LAYERS, N_MATS};
 use super::mesh::{self, dot, Frame, Tri3, PAINT_BIT};
 use super::raster::{fill_mask, Planes, RasterBackend, SV};
 use crate::error::{Error, Result};
-use crate::view::ActorView;
+use crate::view::{ActorKind, ActorView};
 use serde::{Deserialize, Serialize};
 
 /// A camera rigidly mounted on the ego vehicle.
@@ -154,14 +154,20 @@ pub struct ProjectedActor {
     pub center_px: [f32; 2],
     /// 2-D distance from the ego centre to the actor centre, metres.
     pub distance_m: f64,
-    /// Unoccluded share of the actor's in-image silhouette pixels, 0..=1.
+    /// Unoccluded in-image share of the actor's whole silhouette, 0..=1: pixels hidden by
+    /// nearer geometry and those the image border cuts off both count as hidden.
     pub visible_fraction: f32,
-    /// Silhouette pixels inside the image.
+    /// Silhouette pixels, those cut off by the image border included (the in-image count
+    /// scaled by the projected area's in-image share).
     pub pixel_count: u32,
     /// The colour name a viewer gives the actor from the visible pixels of its body paint
     /// (vehicle panels, a person's top, a bicycle's frame) in this image
     /// ([`super::palette::name_pixels`]); `None` when no paint is visible.
     pub colour_name: Option<&'static str>,
+    /// Per-channel median colour of the unoccluded pixels as rendered (lit, shaded, fogged) in
+    /// the rows that show the body colour (vehicles: below the windows, above the wheels;
+    /// people: the torso); [0, 0, 0] when none is unoccluded.
+    pub visible_rgb: [u8; 3],
 }
 
 const NEAR: f32 = 0.1;
@@ -562,14 +568,20 @@ impl Renderer {
             tris.clear();
             mesh::actor(&mut tris, a, map.origin, stamp, a.pose.pos.dist(frame.ego.pose.pos) < DETAIL_M);
             let mut total = 0usize;
+            // Projected area of the whole silhouette and of its part inside the image (faces
+            // overlap in both sums alike): the share the image border cuts off counts as hidden.
+            let (mut area_all, mut area_in) = (0.0f64, 0.0f64);
             for tr in &tris {
                 let c = tr.p.map(|p| cam.to_cam(p));
-                if cam.outside(&c) {
+                if c.iter().all(|p| p[2] < NEAR) {
                     continue;
                 }
                 let n = cam.clip_project(c, &mut poly);
                 for k in 1..n.saturating_sub(1) {
-                    total += fill_mask(&mut mask, w, h, poly[0], poly[k], poly[k + 1], stamp);
+                    let t = [poly[0], poly[k], poly[k + 1]];
+                    area_all += tri_area(&t);
+                    area_in += area_inside(&t, w as f32, h as f32);
+                    total += fill_mask(&mut mask, w, h, t[0], t[1], t[2], stamp);
                 }
             }
             if total == 0 {
@@ -601,18 +613,50 @@ impl Renderer {
                     }
                 }
             }
+            // The colour the image shows: per-channel median of the unoccluded pixels in the
+            // band of the silhouette's rows where the body colour is (below a vehicle's windows
+            // and above its wheels; a person's torso), all of them when the band shows few.
+            let (b0, b1) = match a.kind {
+                ActorKind::Pedestrian | ActorKind::Cyclist => (0.2, 0.5),
+                ActorKind::Car | ActorKind::Bus | ActorKind::Truck | ActorKind::Motorcycle => (0.5, 0.85),
+                _ => (0.0, 1.0),
+            };
+            let mut visible_rgb = [0u8; 3];
+            for band in [(b0, b1), (0.0, 1.0)] {
+                let (r0, r1) =
+                    (y0 + ((y1 - y0) as f32 * band.0) as usize, y0 + ((y1 - y0) as f32 * band.1) as usize);
+                let mut hist = [[0u32; 256]; 3];
+                let mut n = 0usize;
+                for y in r0..r1.max(r0 + 1).min(h) {
+                    for x in x0..x1 {
+                        if mask[y * w + x] == stamp && ids[y * w + x] & !PAINT_BIT == stamp {
+                            n += 1;
+                            for (k, hk) in hist.iter_mut().enumerate() {
+                                hk[self.ss[(y * w + x) * 3 + k] as usize] += 1;
+                            }
+                        }
+                    }
+                }
+                if n >= 10 || (band == (0.0, 1.0) && n > 0) {
+                    visible_rgb = hist.map(|hk| median(&hk, n));
+                    break;
+                }
+            }
             let (_, _, hgt) = mesh::actor_dims(a);
             let centre = a.pose.pos - map.origin;
             let cc = cam.to_cam([centre.x as f32, centre.y as f32, hgt * 0.5]);
             let cp = if cc[2] > 1e-3 { cam.project(cc) } else { SV { x: f32::NAN, y: f32::NAN, w: 0.0 } };
+            let inside = if area_all > 0.0 { (area_in / area_all).clamp(1e-6, 1.0) } else { 1.0 };
+            let whole = ((total as f64 / inside).round() as usize).max(total);
             res.push(ProjectedActor {
                 id: a.id,
                 bbox_px: [x0 as f32, y0 as f32, x1 as f32, y1 as f32],
                 center_px: [cp.x, cp.y],
                 distance_m: a.pose.pos.dist(frame.ego.pose.pos),
-                visible_fraction: visible as f32 / total as f32,
-                pixel_count: total as u32,
+                visible_fraction: visible as f32 / whole as f32,
+                pixel_count: whole as u32,
                 colour_name: super::palette::name_pixels(&px),
+                visible_rgb,
             });
             self.px = px;
         }
@@ -699,6 +743,54 @@ fn shadow<B: RasterBackend>(cam: &Cam, map: &RenderMap, a: &ActorView, b: &mut B
         let m = cam.clip_project(t, poly);
         b.darken_convex(&poly[..m], 158);
     }
+}
+
+/// Median of `n` values given as a 256-bin histogram.
+fn median(hist: &[u32; 256], n: usize) -> u8 {
+    let mut acc = 0usize;
+    for (v, c) in hist.iter().enumerate() {
+        acc += *c as usize;
+        if n > 0 && 2 * acc >= n {
+            return v as u8;
+        }
+    }
+    0
+}
+
+/// Area of a screen triangle, pixels².
+fn tri_area(t: &[SV; 3]) -> f64 {
+    let (a, b, c) = (t[0], t[1], t[2]);
+    (f64::from((b.x - a.x) * (c.y - a.y) - (c.x - a.x) * (b.y - a.y)) * 0.5).abs()
+}
+
+/// Area of a screen triangle's part inside the `w × h` image (Sutherland–Hodgman clip).
+fn area_inside(t: &[SV; 3], w: f32, h: f32) -> f64 {
+    let mut pts: Vec<[f32; 2]> = t.iter().map(|p| [p.x, p.y]).collect();
+    // (axis, bound, keep below the bound?)
+    for (ax, bound, below) in [(0, 0.0, false), (0, w, true), (1, 0.0, false), (1, h, true)] {
+        let inside = |p: &[f32; 2]| if below { p[ax] <= bound } else { p[ax] >= bound };
+        let mut out = Vec::with_capacity(pts.len() + 2);
+        for i in 0..pts.len() {
+            let (a, b) = (pts[i], pts[(i + 1) % pts.len()]);
+            if inside(&a) {
+                out.push(a);
+            }
+            if inside(&a) != inside(&b) {
+                let s = (bound - a[ax]) / (b[ax] - a[ax]);
+                out.push([a[0] + (b[0] - a[0]) * s, a[1] + (b[1] - a[1]) * s]);
+            }
+        }
+        pts = out;
+        if pts.len() < 3 {
+            return 0.0;
+        }
+    }
+    let mut twice = 0.0f64;
+    for i in 0..pts.len() {
+        let (a, b) = (pts[i], pts[(i + 1) % pts.len()]);
+        twice += f64::from(a[0] * b[1] - b[0] * a[1]);
+    }
+    (twice * 0.5).abs()
 }
 
 #[inline(always)]

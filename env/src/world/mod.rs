@@ -20,6 +20,7 @@
 
 pub mod collision;
 pub mod idm;
+pub mod lane_change;
 pub mod lights;
 pub mod scripted;
 pub mod sumo;
@@ -138,6 +139,8 @@ pub struct World {
     /// Traffic key → actor id of the vehicles present.
     traffic_ids: BTreeMap<u64, u32>,
     traffic_frames: u64,
+    /// Traffic vehicles' lane jumps shown as continuous moves.
+    lane_change: lane_change::LaneChangeSmoother,
     /// Scenario actors in stepping order: chained actors after the actor they follow (so a
     /// chain fires in the tick of its event), otherwise by id.
     step_order: Vec<usize>,
@@ -260,6 +263,7 @@ impl World {
             traffic_buf: TrafficFrame::default(),
             traffic_ids: BTreeMap::new(),
             traffic_frames: 0,
+            lane_change: lane_change::LaneChangeSmoother::default(),
             step_order,
             ego_route: scenario.ego.route.clone(),
             ego_route_s: 0.0,
@@ -644,17 +648,18 @@ impl World {
                     a.key
                 )));
             }
+            let pose = self.lane_change.smooth(a.key, a.pose, a.speed_mps);
             match self.traffic_ids.get(&a.key) {
                 Some(&id) => {
                     let rt = &mut self.actors[id as usize - 1];
-                    rt.view.pose = a.pose;
+                    rt.view.pose = pose;
                     rt.view.speed_mps = a.speed_mps;
                     rt.view.braking = a.signals & traffic::SIGNAL_BRAKELIGHT != 0;
                     rt.view.blinkers = traffic::blinkers(a.signals);
                     rt.signals = a.signals;
                     rt.traffic_frame = gen;
                     let h = rt.collider;
-                    self.collision.set_pose(h, a.pose);
+                    self.collision.set_pose(h, pose);
                 }
                 None => {
                     let id = u32::try_from(self.actors.len() + 1)
@@ -700,6 +705,8 @@ impl World {
                 changed = true;
                 false
             });
+            let ids = &self.traffic_ids;
+            self.lane_change.retain(|k| ids.contains_key(&k));
         }
         for (tl, state) in &frame.lights {
             self.lights.set_external(tl, state);

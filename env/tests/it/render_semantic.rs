@@ -109,6 +109,35 @@ fn occluded_actor_has_low_visible_fraction() {
 }
 
 #[test]
+fn border_cut_pixels_count_as_hidden() {
+    // A car whose centre sits on the image's left border shows about half its silhouette: its
+    // visible fraction says so, and its pixel count is that of the whole car.
+    let (_, map) = world();
+    let e = ego();
+    let cfg = CameraConfig::front();
+    let whole =
+        project_actors(map, &frame(&e, &[actor(1, ActorKind::Car, 15.0, 0.0)], &[], &[]), &cfg).unwrap();
+    let whole = whole[0];
+    let mut left = 0.0;
+    let cut = loop {
+        left += 0.1;
+        assert!(left < 30.0, "no offset puts the car on the border");
+        let p =
+            project_actors(map, &frame(&e, &[actor(1, ActorKind::Car, 15.0, left)], &[], &[]), &cfg).unwrap();
+        if p[0].center_px[0] <= 0.0 {
+            break p[0];
+        }
+    };
+    assert!(whole.visible_fraction > 0.95, "{whole:?}");
+    // (Seen from the side at the frame's edge, the car shows more than its back: the share is an
+    // estimate from projected areas, not exactly a half.)
+    assert!((0.25..0.7).contains(&cut.visible_fraction), "{cut:?}");
+    // The whole silhouette is counted: more pixels than the in-image box could hold.
+    let [x0, y0, x1, y1] = cut.bbox_px;
+    assert!(cut.pixel_count as f32 > (x1 - x0) * (y1 - y0), "{cut:?}");
+}
+
+#[test]
 fn actor_behind_camera_is_not_drawn() {
     let (_, map) = world();
     let e = ego();

@@ -21,6 +21,7 @@ from drivehierarchy.benchmark.openloop.scoring import score_run
 REPO = Path(__file__).resolve().parents[3]
 SUITE = REPO / "scenarios" / "r4"
 PER_TASK = 6
+SPARSE_TASKS = {"R1_1_C", "R2_2_B", "R2_3"}
 SEED = 7
 
 
@@ -44,7 +45,11 @@ def test_every_registered_task_has_a_full_file_under_the_original_name(generated
     for task, info in summary["tasks"].items():
         assert info["file"] == f"{TASK_FILE_STEM[task]}.jsonl"
         recs = _read(out / info["file"])
-        assert len(recs) == PER_TASK, task
+        # R1_1_C asks only where one frame shows the status (a lit brake lamp, a kerb-parked
+        # car, a person's gait), R2_2_B only about objects within 40 m with states balanced
+        # within each class, R2_3 one pair with a same-heading reference: a small set has fewer
+        # such moments.
+        assert len(recs) == PER_TASK or (task in SPARSE_TASKS and len(recs) >= 2), task
 
 
 def test_records_have_the_original_fields(generated, openloop_data_dir: Path) -> None:
@@ -89,7 +94,7 @@ def test_oracle_answers_score_full_marks(generated, tmp_path: Path) -> None:
     scored = {f["source_file"] for f in result["per_file"]}
     assert f"{TASK_FILE_STEM['R1_4']}.jsonl" not in scored  # the judge task, skipped without a judge
     per_record = _read(run / "evaluation" / "per_record.jsonl")
-    assert len(per_record) == PER_TASK * (len(summary["tasks"]) - 1)
+    assert len(per_record) == sum(i["records"] for t, i in summary["tasks"].items() if t != "R1_4")
     bad = [r for r in per_record if r["score"] != 100.0]
     assert not bad, bad[:3]
 
@@ -99,7 +104,8 @@ def test_loader_resolves_relative_images_without_image_root(generated) -> None:
     catalog = default_catalog(out)
     for spec in select_datasets(catalog, list(summary["tasks"])):
         ds = load_dataset(catalog, spec)
-        assert not ds.issues and len(ds.records) == PER_TASK
+        written = {i["file"]: i["records"] for i in summary["tasks"].values()}
+        assert not ds.issues and len(ds.records) == written[spec.path]
         for rec in ds.records:
             assert rec.images
             for img in rec.images:
@@ -136,8 +142,12 @@ def test_balance_and_visibility(generated) -> None:
     out, _ = generated
     yn = Counter(r["answer"] for r in _read(out / "R1_1_A_Existence.jsonl"))
     assert abs(yn["Yes"] - yn["No"]) <= 1
-    letters = Counter(r["answer"] for r in _read(out / "R1_1_C_State_Attribute.jsonl"))
-    assert max(letters.values()) - min(letters.values()) <= 1 and len(letters) == 3
+    # Correct letters cycle over each record's options (vehicles 3, people 2).
+    for k in (2, 3):
+        letters = Counter(
+            r["answer"] for r in _read(out / "R1_1_C_State_Attribute.jsonl") if len(r["options"]) == k
+        )
+        assert not letters or max(letters.values()) - min(letters.get(c, 0) for c in "ABC"[:k]) <= 2
     for name in ("R1_1_B_Counting.jsonl", "R1_2_C_Distance_Bucket.jsonl"):
         recs = _read(out / name)
         assert sum(r["answer"] == "0" for r in recs) <= quality.MAX_ZERO_SHARE * len(recs) + 1e-9

@@ -69,7 +69,9 @@ def _frames(rec: dict[str, Any]) -> dict[str, Any]:
 
 def test_every_task_yields_records(records) -> None:
     for task in TASKS:
-        assert len(records[task]) >= 4, f"{task}: only {len(records[task])} records from the rollouts"
+        # R2_2_B asks only about objects within 40 m, balanced within each class: fewer.
+        least = 2 if task == "R2_2_B" else 4
+        assert len(records[task]) >= least, f"{task}: only {len(records[task])} records from the rollouts"
 
 
 @pytest.mark.parametrize("task", TASKS)
@@ -141,12 +143,20 @@ def test_counts_are_the_world_s_unique_visible_vehicles(records) -> None:
     assert answers.count("0") <= 0.25 * len(answers), "counts dominated by 0"
 
 
-def test_relations_follow_the_ego_frame_positions(records) -> None:
+def test_relations_follow_the_ego_frame_positions(records, moments) -> None:
+    pairs = set()
     for rec in records["R2_3"]:
         md = rec["meta_data"]
         f = rec["_frames"][0]
         by_id = {str(v.actor.id): v for v in f.visible}
         subj, ref = by_id[md["subject_instance_token"]], by_id[md["reference_instance_token"]]
+        # The reference faces within 45° of the ego: its own axes give the same answer.
+        ego_yaw = next(m.ego.yaw for m in moments if m.frame() is f)
+        assert abs((math.degrees(ref.actor.yaw - ego_yaw) + 180) % 360 - 180) <= r2.REFERENCE_HEADING_DEG
+        assert ref.actor.category in r2.REFERENCE_CATEGORIES
+        pair = (rec["image_path"], frozenset((subj.actor.id, ref.actor.id)))
+        assert pair not in pairs, "a mirrored pair"
+        pairs.add(pair)
         for obj, key in ((subj, "subject_pixel"), (ref, "reference_pixel")):
             u, v = md[key]  # inside the object's box and no other shown object's
             assert obj.bbox[0] <= u <= obj.bbox[2] and obj.bbox[1] <= v <= obj.bbox[3]

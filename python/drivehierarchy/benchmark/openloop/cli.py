@@ -223,8 +223,11 @@ def _cmd_generate(args: argparse.Namespace) -> int:
         jobs=args.jobs,
         progress=not args.no_progress,
     )
+    from .generate.quality import format_table
+
     for task, info in summary["tasks"].items():
         print(f"{task}\t{info['records']}\t{info['file']}")
+    print(format_table(summary["quality"]), file=sys.stderr)
     print(f"wrote {args.out} ({summary['images']} images)", file=sys.stderr)
     return 0
 

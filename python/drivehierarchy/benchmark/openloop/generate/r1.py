@@ -8,6 +8,7 @@ shown (in the image but below the visibility rule) are not asked.
 
 from __future__ import annotations
 
+import itertools
 import math
 import random
 from collections.abc import Sequence
@@ -23,9 +24,11 @@ PLURAL = {
     "Bicycle": "Bicycles",
     "Traffic Cone": "Traffic Cones",
 }
+# The sim's people never sit or lie: offering "sitting_or_lying" would only make the options
+# easier to rule out than their count says.
 STATUS_OPTIONS = {
     "Vehicle": ("moving", "parked", "stopped"),
-    "Pedestrian": ("moving", "standing", "sitting_or_lying"),
+    "Pedestrian": ("moving", "standing"),
 }
 BUCKETS = (("Near", "<20m", 0.0, 20.0), ("Mid", "20-50m", 20.0, 50.0), ("Far", ">50m", 50.0, math.inf))
 # Distances this close to a bucket edge are not asked about (the edge must be clear-cut).
@@ -60,8 +63,15 @@ def _ego_xy(m: Moment, v: Visible) -> list[float]:
 
 
 def _clear(frame: Frame, category: str) -> bool:
-    """No actor of `category` is only partly shown (so counts and existence are clear-cut)."""
-    return not any(p.actor.category == category for p in frame.partial)
+    """No actor of `category` is in the dead band (so counts and existence are clear-cut); for
+    vehicles, no motorcycle or bicycle is shown either (a person may count one as a vehicle:
+    nuScenes does; audit)."""
+    two_wheel = ("Motorcycle", "Bicycle")
+    if category == "Vehicle" and (
+        frame.blocking(two_wheel) or any(v.actor.category in two_wheel for v in frame.visible)
+    ):
+        return False
+    return not frame.blocking(category)
 
 
 def _front_frames(moments: Sequence[Moment]) -> list[tuple[Moment, Frame]]:
@@ -89,8 +99,7 @@ def _order(rec: dict[str, Any], id_key: str = "Question_id") -> dict[str, Any]:
 # -- R1_1 ---------------------------------------------------------------------------------------
 @register("R1_1_A", needs=Needs())
 def r1_1_a(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str, Any]]:
-    yes: list[tuple[dict[str, Any], list[Frame]]] = []
-    no: list[tuple[dict[str, Any], list[Frame]]] = []
+    groups: dict[str, tuple[list[Any], list[Any]]] = {c: ([], []) for c in CATEGORIES}
     for m, f in _front_frames(moments):
         for cat in CATEGORIES:
             if not _clear(f, cat):
@@ -112,14 +121,15 @@ def r1_1_a(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
                     "original_subtask_id": "L1-1-A",
                 }
             )
-            (yes if vis else no).append((rec, [f]))
-    chosen = quality.balance_binary(yes, no, n, rng)
+            groups[cat][0 if vis else 1].append((rec, [f]))
+    # Half yes and half no within every asked class: the class says nothing about the answer.
+    chosen = quality.balance_binary_by(groups, n, rng)
     return _finish([c[0] for c in chosen], "R1_1_A", [c[1] for c in chosen])
 
 
 @register("R1_1_B", needs=Needs())
 def r1_1_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str, Any]]:
-    by_count: dict[int, list[Any]] = {}
+    by_count: dict[tuple[str, int], list[Any]] = {}
     for m, f in _front_frames(moments):
         for cat in CATEGORIES:
             if not _clear(f, cat):
@@ -141,7 +151,8 @@ def r1_1_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
                     "original_subtask_id": "L1-1-B",
                 }
             )
-            by_count.setdefault(len(vis), []).append((rec, [f]))
+            by_count.setdefault((cat, len(vis)), []).append((rec, [f]))
+    # Round-robin over (class, count): counts over several classes, no class or count dominant.
     chosen = quality.balance_counts(by_count, n, rng)
     return _finish([c[0] for c in chosen], "R1_1_B", [c[1] for c in chosen])
 
@@ -168,13 +179,57 @@ def _nearest(f: Frame, cat: str) -> Visible | None:
     return vis[0]
 
 
+# What one frame shows of a status (R1_1_C). Vehicles: "stopped" = brake lamps lit in a traffic
+# lane (standing still), "parked" = standing outside the traffic lanes with its lamps dark,
+# "moving" = in a lane with its lamps dark, clearly moving. Lamps show only from behind (the
+# vehicle heading within REAR_VIEW_DEG of the camera's line of sight) and only on a box at least
+# LAMP_BOX_PX wide. Pedestrians: "moving" / "standing" from the drawn pose, whose walking gait
+# follows the world speed: clear of the pose's threshold on either side.
+REAR_VIEW_DEG = 60.0
+LAMP_BOX_PX = 40
+CLEARLY_MOVING_MPS = 2.0
+STILL_MPS = 0.05
+PED_WALKING_MPS = 0.5
+POSE_BOX_PX = 40
+
+
+def frame_status(m: Moment, f: Frame, v: Visible) -> str | None:
+    """The status the frame itself shows for `v`, or None when it gives no cue."""
+    a = v.actor
+    bw, bh = v.bbox[2] - v.bbox[0], v.bbox[3] - v.bbox[1]
+    if a.category == "Pedestrian":
+        if bh < POSE_BOX_PX:
+            return None
+        if a.speed_mps >= PED_WALKING_MPS:
+            return "moving"
+        return "standing" if a.speed_mps <= STILL_MPS else None
+    if a.category != "Vehicle":
+        return None
+    if a.motion == "static":
+        where = m.rollout.standing.get(a.id, "")
+        return "parked" if where == "kerb" and not a.braking else None
+    # Lamps are at the rear: seen when the camera looks at the vehicle's back.
+    sight = math.atan2(a.y - m.ego.y, a.x - m.ego.x)
+    rel = abs((a.yaw - sight + math.pi) % (2 * math.pi) - math.pi)
+    if math.degrees(rel) > REAR_VIEW_DEG or bw < LAMP_BOX_PX:
+        return None
+    if a.braking and a.speed_mps <= STILL_MPS:
+        return "stopped"
+    if not a.braking and a.speed_mps >= CLEARLY_MOVING_MPS:
+        return "moving"
+    return None
+
+
 @register("R1_1_C", needs=Needs())
 def r1_1_c(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str, Any]]:
-    by_status: dict[str, list[Any]] = {}
+    by_status: dict[str, dict[str, list[Any]]] = {}
     for m, f in _front_frames(moments):
         for cat, vocab in STATUS_OPTIONS.items():
             v = _nearest(f, cat)
-            if v is None or v.actor.status not in vocab:
+            if v is None or v.distance_m > MAX_TARGET_M:
+                continue
+            status = frame_status(m, f, v)
+            if status is None or status not in vocab:
                 continue
             rec = _order(
                 {
@@ -182,14 +237,16 @@ def r1_1_c(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
                     "question_type": "L1-1_State",
                     "question": f"What is the current status of the nearest {cat} in CAM_FRONT?",
                     "options": list(vocab),
-                    "answer": v.actor.status,
+                    "answer": status,
                     "meta_data": {
                         "category": cat,
                         "target_object_id": str(v.actor.id),
                         "target_distance_m": v.distance_m,
-                        "gt_status": v.actor.status,
+                        "gt_status": status,
                         "speed_mps": round(v.actor.speed_mps, 3),
+                        "brake_lamps": v.actor.braking,
                         "visible_fraction": v.visible_fraction,
+                        "bbox": list(v.bbox),
                         "image_size": [W, H],
                     },
                     "image_path": image_ref(f),
@@ -198,8 +255,9 @@ def r1_1_c(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
                     "original_subtask_id": "L1-1-C",
                 }
             )
-            by_status.setdefault(f"{cat}:{v.actor.status}", []).append((rec, [f]))
-    chosen = quality.balance_groups(by_status, n, rng)
+            by_status.setdefault(cat, {}).setdefault(status, []).append((rec, [f]))
+    # Balanced within each asked class: the class must not give the status away.
+    chosen = quality.balance_within_classes(by_status, n, rng, max_share=quality.MAX_OPTION_SHARE)
     recs = [c[0] for c in chosen]
     quality.letter_options(recs, rng, answer_style="letter")
     return _finish(recs, "R1_1_C", [c[1] for c in chosen])
@@ -334,14 +392,19 @@ def _region(f: Frame, v: Visible) -> str:
     return "on the left side" if u < 0.38 else ("on the right side" if u > 0.62 else "in the middle")
 
 
-def _motion_phrase(m: Moment, v: Visible) -> str:
+def _motion_phrase(m: Moment, f: Frame, v: Visible) -> str | None:
+    """What one frame shows of how the object moves, or None when it shows nothing clear (a
+    slow or stopped vehicle whose lamps the camera cannot see, a person at a shuffle)."""
     a = v.actor
     if a.category == "Pedestrian":
-        return "walking" if a.moving else "standing still"
-    if a.status == "parked":
-        return "parked"
-    if not a.moving:
-        return "stopped"
+        if a.speed_mps >= PED_WALKING_MPS:
+            return "walking"
+        return "standing still" if a.speed_mps <= STILL_MPS else None
+    status = frame_status(m, f, v) if a.category == "Vehicle" else None
+    if status in ("parked", "stopped"):
+        return status
+    if a.speed_mps < CLEARLY_MOVING_MPS:
+        return None
     rel = (a.yaw - m.ego.yaw + math.pi) % (2 * math.pi) - math.pi
     if abs(rel) < math.pi / 4:
         return "driving in the same direction as the ego car"
@@ -350,24 +413,49 @@ def _motion_phrase(m: Moment, v: Visible) -> str:
     return "crossing from left to right" if rel < 0 else "crossing from right to left"
 
 
-def describe(m: Moment, f: Frame, v: Visible) -> str:
-    noun = {"Pedestrian": "pedestrian", "Bicycle": "cyclist", "Traffic Cone": "traffic cone"}.get(
+def _noun_r13(v: Visible) -> str:
+    return {"Pedestrian": "pedestrian", "Bicycle": "cyclist", "Traffic Cone": "traffic cone"}.get(
         v.actor.category, v.actor.subtype
     )
-    colour = "" if v.actor.category == "Pedestrian" else f"{v.actor.colour} "
+
+
+def _article(word: str) -> str:
+    return "an" if word[:1] in "aeiou" else "a"
+
+
+def describe(m: Moment, f: Frame, v: Visible) -> str | None:
+    """The referring description of `v` (colour as the image shows it, where known), or None
+    when the frame shows nothing clear of its motion."""
+    motion = _motion_phrase(m, f, v)
+    if motion is None:
+        return None
+    colour = "" if v.actor.category == "Pedestrian" or not v.colour else f"{v.colour} "
+    words = f"{colour}{_noun_r13(v)}"
     where = f"{_region(f, v)} of the image, ahead of the ego car"
-    return f"There is a {colour}{noun} {_motion_phrase(m, v)}, {where}."
+    return f"There is {_article(words)} {words} {motion}, {where}."
+
+
+def _could_be(m: Moment, f: Frame, target: Visible, other: Visible) -> bool:
+    """Whether `other` also fits `target`'s description (an unnamed colour or an unclear motion
+    fits any)."""
+    if _noun_r13(other) != _noun_r13(target) or _region(f, other) != _region(f, target):
+        return False
+    if target.colour and other.colour and target.colour != other.colour:
+        return False
+    mo = _motion_phrase(m, f, other)
+    return mo is None or mo == _motion_phrase(m, f, target)
 
 
 @register("R1_3", needs=Needs())
 def r1_3(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str, Any]]:
-    groups: dict[str, list[Any]] = {}
+    by_desc: dict[str, list[Any]] = {}
     for m, f in _front_frames(moments):
-        descs = {v.actor.id: describe(m, f, v) for v in f.visible}
         for v in f.visible:
             if v.actor.category not in ("Vehicle", "Pedestrian", "Bicycle", "Motorcycle"):
                 continue
-            d = descs[v.actor.id]
+            d = describe(m, f, v)
+            if d is None:
+                continue
             # The description must single the object out among everything shown, and the box
             # (the whole silhouette) must be mostly unoccluded.
             bw, bh = v.bbox[2] - v.bbox[0], v.bbox[3] - v.bbox[1]
@@ -375,8 +463,8 @@ def r1_3(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str
                 v.visible_fraction < 0.8
                 or min(bw, bh) < MIN_BOX_PX
                 or v.distance_m > MAX_TARGET_M
-                or list(descs.values()).count(d) != 1
-                or f.partial
+                or any(o is not v and _could_be(m, f, v, o) for o in f.visible)
+                or f.blocking(("Vehicle", "Pedestrian", "Bicycle", "Motorcycle"))
             ):
                 continue
             rec = {
@@ -402,7 +490,12 @@ def r1_3(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str
                 "refined_subtask_id": "R1-3",
                 "original_subtask_id": "L1-3",
             }
-            groups.setdefault(v.actor.category, []).append((rec, [f]))
+            by_desc.setdefault(d, []).append((rec, [f]))
+    # No two records share a description: one (seeded) candidate per description.
+    groups: dict[str, list[Any]] = {}
+    for d in sorted(by_desc):
+        rec, fr = by_desc[d][rng.randrange(len(by_desc[d]))]
+        groups.setdefault(rec["meta_data"]["agent_type"], []).append((rec, fr))
     chosen = quality.balance_groups(groups, n, rng)
     return _finish([c[0] for c in chosen], "R1_3", [c[1] for c in chosen])
 
@@ -415,75 +508,195 @@ R1_4_QUESTIONS = (
     "What are you doing right now and why?",
     "Describe the current driving situation and your action.",
 )
-SCENE_PHRASES = {
-    "01_pedestrian": "pedestrians may cross the road",
-    "02_obstacles": "there are obstacles on the road",
-    "03_turning": "the route turns at the junction",
-    "04_intersection": "the ego car is crossing an intersection",
-    "05_t_intersection": "the ego car is at a T-intersection",
-    "06_traffic_flow": "the ego car is driving in traffic",
-    "07_sudden_brake": "the vehicle ahead may brake suddenly",
-    "08_merging": "traffic is merging",
-    "09_yielding": "the ego car has to yield to other road users",
-    "10_roundabout": "the ego car is in a roundabout",
-}
+# Only drivers whose motion is purposeful: the noisy expert's weaving is not a manoeuvre.
+R1_4_DRIVERS = ("expert", "late_expert", "cautious_expert")
+# Speed over the frames shown (first frame → last, and over the last second): a change of at
+# least SPEED_CHANGE_MPS that continues into the last second is slowing down / speeding up;
+# within STEADY_MPS over both spans is steady; anything between is not described.
+STOPPED_MPS = 0.3
+SPEED_CHANGE_MPS = 1.0
+LAST_SECOND_CHANGE_MPS = 0.3
+STEADY_MPS = 0.5
+MIN_DRIVING_MPS = 2.0
+# Heading over the frames shown: a turn is a sustained yaw rate, at least TURN_HALF_DEG in
+# each second of the same sign and TURN_DEG over the two; straight stays within STRAIGHT_DEG
+# (and STRAIGHT_HALF_DEG per second). A weave or a slight bend is not described.
+TURN_DEG = 15.0
+TURN_HALF_DEG = 4.0
+STRAIGHT_DEG = 4.0
+STRAIGHT_HALF_DEG = 3.0
+# What can cause the action, in the last frame shown: a road user in the ego's lane ahead
+# (forward 2–LEAD_MAX_M, |lateral| ≤ LEAD_LATERAL_M, heading within 45° of the ego's), a
+# pedestrian on the road ahead (forward ≤ PED_MAX_M, |lateral| ≤ PED_LATERAL_M), the route's
+# next signal head within LIGHT_MAX_M. "Clear" needs nothing of these within CLEAR_M.
+LEAD_MAX_M = 35.0
+LEAD_LATERAL_M = 1.8
+PED_MAX_M = 30.0
+PED_LATERAL_M = 5.0
+LIGHT_MAX_M = 45.0
+CLEAR_M = 45.0
+ROAD_USERS = ("Vehicle", "Motorcycle", "Bicycle")
+NOUN_OF = {"Bicycle": "cyclist", "Motorcycle": "motorcycle"}
 
 
-def situation_answer(m: Moment, frames: list[Frame]) -> str:
-    """Templated reference: the ego's action (from its speed change and heading change over
-    the next second), the closest road user ahead and the scenario's semantics."""
-    fut = m.ego_future(1.0)
-    v0 = m.ego.speed_mps
-    v1 = fut[-1].speed_mps if fut else v0
-    dyaw = ((fut[-1].yaw if fut else m.ego.yaw) - m.ego.yaw + math.pi) % (2 * math.pi) - math.pi
-    if v0 < 0.3 and v1 < 0.3:
-        action = "I am stopped"
-    elif v1 < v0 - 0.5:
-        action = "I am slowing down"
-    elif v1 > v0 + 0.5:
-        action = "I am accelerating"
-    else:
-        action = f"I am keeping a steady speed of about {round(v0 * 3.6):d} km/h"
-    if v0 >= 0.3 or v1 >= 0.3:
-        action += (
-            " and turning left"
-            if dyaw > 0.12
-            else (" and turning right" if dyaw < -0.12 else " and going straight")
-        )
-    near = [
-        v
-        for v in frames[-1].visible
-        if v.actor.category in ("Vehicle", "Pedestrian", "Bicycle", "Motorcycle")
-    ]
-    why = SCENE_PHRASES.get(m.category, "of the road layout ahead")
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def ego_speed_action(speeds: Sequence[float]) -> str | None:
+    """The speed part of the ego's action over the frames shown (`speeds` at 4 Hz from the
+    first frame to the last), or None when it is in no clear class."""
+    v0, v_mid, v1 = speeds[0], speeds[-5], speeds[-1]
+    if v1 < STOPPED_MPS:
+        return "stopped" if v_mid < 1.0 else None
+    if v1 <= v0 - SPEED_CHANGE_MPS and v1 <= v_mid - LAST_SECOND_CHANGE_MPS:
+        return "slowing"
+    if v1 >= v0 + SPEED_CHANGE_MPS and v1 >= v_mid + LAST_SECOND_CHANGE_MPS:
+        return "speeding"
+    steady = abs(v1 - v0) <= STEADY_MPS and abs(v1 - v_mid) <= LAST_SECOND_CHANGE_MPS
+    if steady and min(speeds) >= MIN_DRIVING_MPS and max(speeds) - min(speeds) <= 2 * STEADY_MPS:
+        return "steady"
+    return None
+
+
+def ego_turn(yaws: Sequence[float]) -> str | None:
+    """ "left", "right" or "straight" over the frames shown (`yaws` at 4 Hz, first to last
+    frame), or None for a weave or a slight bend."""
+    first = math.degrees(_wrap(yaws[-5] - yaws[0]))
+    last = math.degrees(_wrap(yaws[-1] - yaws[-5]))
+    total = first + last
+    steps = [math.degrees(_wrap(b - a)) for a, b in itertools.pairwise(yaws)]
+    if abs(total) < STRAIGHT_DEG and max(abs(first), abs(last)) < STRAIGHT_HALF_DEG:
+        return "straight"
+    same_sign = all(x > -0.5 for x in steps) or all(x < 0.5 for x in steps)
+    if (
+        abs(total) >= TURN_DEG
+        and min(abs(first), abs(last)) >= TURN_HALF_DEG
+        and same_sign
+        and first * last > 0
+    ):
+        return "left" if total > 0 else "right"
+    return None
+
+
+def _noun(v: Visible) -> str:
+    a = v.actor
+    if a.category in NOUN_OF:
+        return NOUN_OF[a.category]
+    return f"{v.colour} {a.subtype}" if v.colour else a.subtype
+
+
+def _ahead(m: Moment, f: Frame) -> tuple[Visible | None, Visible | None, list[Visible]]:
+    """(lead road user in the ego's lane, pedestrian on the road ahead, every shown road user
+    or pedestrian within CLEAR_M ahead) in the frame `f` at moment `m`."""
+    lead = ped = None
+    near = []
+    for v in f.visible:
+        fwd, left = ego_xy_of(m, v.actor.x, v.actor.y)
+        if v.actor.category not in (*ROAD_USERS, "Pedestrian") or fwd < 0:
+            continue
+        if fwd <= CLEAR_M and abs(left) <= 2 * LEAD_LATERAL_M:
+            near.append(v)
+        if v.actor.category == "Pedestrian":
+            if fwd <= PED_MAX_M and abs(left) <= PED_LATERAL_M and ped is None:
+                ped = v
+            continue
+        same_dir = abs(_wrap(v.actor.yaw - m.ego.yaw)) < math.pi / 4
+        if 2.0 <= fwd <= LEAD_MAX_M and abs(left) <= LEAD_LATERAL_M and same_dir and lead is None:
+            lead = v
+    return lead, ped, near
+
+
+def ego_xy_of(m: Moment, x: float, y: float) -> tuple[float, float]:
+    dx, dy = x - m.ego.x, y - m.ego.y
+    c, s = math.cos(m.ego.yaw), math.sin(m.ego.yaw)
+    return dx * c + dy * s, -dx * s + dy * c
+
+
+def situation_answer(m: Moment, frames: list[Frame]) -> str | None:
+    """The reference answer: what the frames shown say the ego does, over those frames and
+    ending at the last one (never after it), and the visible cause. None when either is not
+    clear-cut (a weave, a slight bend, a slowing with nothing visible that causes it)."""
+    steps = range(frames[0].step, frames[-1].step + 1)
+    egos = [m.rollout.states[s][1] for s in steps]
+    speed = ego_speed_action([e.speed_mps for e in egos])
+    if speed is None:
+        return None
+    turn = "straight" if speed == "stopped" else ego_turn([e.yaw for e in egos])
+    if turn is None:
+        return None
+    lead, ped, near = _ahead(m, frames[-1])
+    light = m.rollout.lights[m.step] if m.rollout.lights else None
+    light_near = light is not None and light.colour != "none" and light.distance_m <= LIGHT_MAX_M
+    light_was = m.rollout.lights[frames[0].step] if m.rollout.lights else None
+    turning = "" if turn == "straight" else f" and turning {turn}"
+    if speed in ("stopped", "slowing"):
+        verb = "I am stopped" if speed == "stopped" else f"I am slowing down{turning}"
+        if ped is not None:
+            return f"{verb} because a pedestrian is crossing the road ahead."
+        if light_near and light is not None and light.colour == "red":
+            return f"{verb} because the traffic light ahead is red."
+        if lead is not None and (lead.actor.braking or not lead.actor.moving):
+            state = "braking" if lead.actor.moving else "stopped"
+            return f"{verb} because the {_noun(lead)} ahead of me is {state}."
+        if speed == "slowing" and turn != "straight" and not near:
+            return f"I am slowing down to turn {turn}; the road ahead is clear."
+        return None
+    if ped is not None or (light_near and light is not None and light.colour != "green"):
+        return None  # driving on toward a pedestrian or a red light: not a clear situation
+    verb = "I am speeding up" if speed == "speeding" else "I am driving at a steady speed"
+    verb += turning if turning else " and going straight"
+    if lead is not None:
+        if lead.actor.braking or not lead.actor.moving:
+            return None
+        return f"{verb}, following the {_noun(lead)} ahead of me."
     if near:
-        v = near[0]
-        what = "pedestrian" if v.actor.category == "Pedestrian" else f"{v.actor.colour} {v.actor.subtype}"
-        near_text = f"the closest road user ahead is a {what} about {round(v.distance_m)} m away"
-        return f"{action} because {why}; {near_text}."
-    return f"{action} because {why}; no other road user is visible ahead."
+        return None
+    if (
+        speed == "speeding"
+        and light_near
+        and light_was is not None
+        and light_was.colour == "red"
+        and light is not None
+        and light.colour == "green"
+    ):
+        return f"{verb} because the traffic light ahead has turned green."
+    return f"{verb} because the road ahead is clear."
 
 
 @register("R1_4", needs=Needs(history=R1_4_FRAMES, history_stride=R1_4_STRIDE))
 def r1_4(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str, Any]]:
-    cands: list[tuple[dict[str, Any], list[Frame]]] = []
+    groups: dict[str, list[Any]] = {}
+    seen: set[str] = set()
     for m in moments:
+        if m.driver not in R1_4_DRIVERS:
+            continue
         frames = m.history(R1_4_FRAMES, R1_4_STRIDE)
         if frames is None:
             continue
-        q = R1_4_QUESTIONS[len(cands) % len(R1_4_QUESTIONS)]
+        answer = situation_answer(m, frames)
+        if answer is None:
+            continue
+        q = R1_4_QUESTIONS[len(seen) % len(R1_4_QUESTIONS)]
+        if f"{q}|{answer}" in seen:
+            q = next((x for x in R1_4_QUESTIONS if f"{x}|{answer}" not in seen), "")
+            if not q:
+                continue  # no two records share question and answer
+        seen.add(f"{q}|{answer}")
         rec = {
             "Question_id": None,
             "task_id": f"R1-4_DriveHierarchy_{m.key}",
             "segment_id": m.key,
             "image_paths": [image_ref(f) for f in frames],
             "question": q,
-            "answer": situation_answer(m, frames),
+            "answer": answer,
             "original_Question_id": "",
             "original_task_id": "",
             "refined_subtask_id": "R1-4",
             "original_subtask_id": "L1-4",
         }
-        cands.append((rec, frames))
-    chosen = quality.balance_groups({"all": cands}, n, rng)
+        # Balanced over the kind of situation (the action and the cause's kind).
+        kind = answer.split(" because ")[-1].split(" ")[0] + "|" + " ".join(answer.split()[:4])
+        groups.setdefault(kind, []).append((rec, frames))
+    chosen = quality.balance_groups(groups, n, rng)
     return _finish([c[0] for c in chosen], "R1_4", [c[1] for c in chosen])

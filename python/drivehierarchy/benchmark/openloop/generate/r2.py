@@ -21,13 +21,9 @@ import random
 from collections.abc import Iterable, Sequence
 from typing import Any
 
-from .rollout import FRONT, MIN_VISIBLE_PIXELS, SURROUND, Frame, Moment, Needs, Visible, register
+from .rollout import FRONT, SURROUND, Frame, Moment, Needs, Visible, register
 
 VEHICLE_CATEGORIES = ("Vehicle", "Motorcycle")
-# An actor that fails the visibility rule but shows at least this share of the rule's pixel
-# minimum (a car mostly hidden behind another, one just under the size limit) is one a person
-# might or might not count: a count it could change is not asked. Below it, it is a speck.
-GRAY_ZONE_SHARE = 0.5
 
 R2_1_QUESTION = (
     "Given the 6 surround-view images (Front, Front-Left, Front-Right, Back, Back-Left, Back-Right) "
@@ -55,6 +51,7 @@ R2_3_QUESTION = (
 # frames half a second apart a person cannot tell them.
 CLEARLY_MOVING_MPS = 1.0
 CLEARLY_STILL_MPS = 0.1
+R2_2_B_MAX_SHARE = 0.3
 STATES = {"Vehicle": ("moving", "stopped", "parked"), "Pedestrian": ("moving", "standing", "sitting/lying")}
 ATTRIBUTE = {"sitting/lying": "sitting_lying_down"}
 # Relations: sector centre (degrees, counter-clockwise from the ego's forward axis), name.
@@ -78,6 +75,11 @@ RELATION_MIN_GAP_SHARE = 0.25
 # Farther than this, depth is hard to judge in the image: neither object may be.
 RELATION_MAX_DISTANCE_M = 40.0
 RELATION_CATEGORIES = ("Vehicle", "Pedestrian", "Bicycle", "Motorcycle", "Traffic Cone")
+# The reference object must have a front (not a cone) and face within this many degrees of the
+# ego's heading: then its own axes agree with the ego's on the answer (sectors are 45° wide and
+# asked only within RELATION_MARGIN_DEG of their centre).
+REFERENCE_CATEGORIES = ("Vehicle", "Pedestrian", "Bicycle", "Motorcycle")
+REFERENCE_HEADING_DEG = 45.0
 
 
 # -- shared helpers (also used by r3) ------------------------------------------------------------
@@ -130,16 +132,12 @@ def unique_point(frame: Frame, target: Visible) -> tuple[int, int] | None:
 
 
 def _ambiguous_ids(frames: Iterable[Frame], categories: Sequence[str]) -> tuple[set[int], set[int]]:
-    """(ids shown clearly in some frame, ids shown only in the gray zone in every frame)."""
+    """(ids shown clearly in some frame, ids shown only in the dead band in every frame)."""
     clear: set[int] = set()
     unclear: set[int] = set()
     for f in frames:
         clear.update(v.actor.id for v in f.visible if v.actor.category in categories)
-        unclear.update(
-            v.actor.id
-            for v in f.partial
-            if v.actor.category in categories and v.visible_pixels >= GRAY_ZONE_SHARE * MIN_VISIBLE_PIXELS
-        )
+        unclear.update(v.actor.id for v in f.blocking(categories))
     return clear, unclear - clear
 
 
@@ -162,12 +160,13 @@ def _balance_counts(
 
 
 def _balance_by(cands: list[tuple[dict[str, Any], str]], n: int, rng: random.Random) -> list[dict[str, Any]]:
-    from .quality import balance_groups
+    """Balanced over the answers: no answer is that of more than MAX_OPTION_SHARE of the records."""
+    from .quality import MAX_OPTION_SHARE, balance_groups
 
     by: dict[str, list[Any]] = {}
     for rec, key in cands:
         by.setdefault(key, []).append((rec,))
-    return [item[0] for item in balance_groups(by, n, rng)]
+    return [item[0] for item in balance_groups(by, n, rng, max_share=MAX_OPTION_SHARE)]
 
 
 def _sorted_by_key(recs: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -316,7 +315,7 @@ def _state_at(m: Moment, step: int, actor_id: int, category: str) -> str | None:
 
 @register("R2_2_B", Needs(clip=R2_2_B_FRAMES, clip_stride=R2_2_A_STRIDE))
 def build_r2_2_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str, Any]]:
-    cands = []
+    cands: list[tuple[dict[str, Any], str]] = []
     for m in moments:
         full = m.clip(R2_2_B_FRAMES, R2_2_A_STRIDE)
         if full is None:
@@ -324,7 +323,8 @@ def build_r2_2_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[
         first = full[0]
         for target in first.visible:
             cat = target.actor.category
-            if cat not in STATES:
+            # A far speck's state change is not something a person can see (audit, issue 33).
+            if cat not in STATES or target.distance_m > RELATION_MAX_DISTANCE_M:
                 continue
             point = unique_point(first, target)
             if point is None:
@@ -364,7 +364,7 @@ def build_r2_2_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[
             u, v = point
             dur = last.t_s - first.t_s
             category = cat.lower()
-            rec = {
+            rec: dict[str, Any] = {
                 "scene_token": scene_token(m),
                 "sample_token_list": [sample_token(m, f.step) for f in clip],
                 "target_instance_token": str(target.actor.id),
@@ -398,9 +398,16 @@ def build_r2_2_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[
                 "_frames": clip,
             }
             cands.append((rec, answer))
-    picked = _balance_by(cands, n, rng)
-    from .quality import letter_options
+    # Balanced within each asked class (the class is in the question).
+    from .quality import balance_within_classes, letter_options
 
+    by: dict[str, dict[str, list[Any]]] = {}
+    for rec, answer in cands:
+        cls = rec["meta_data"]["start_attribute"].split(".")[0]
+        by.setdefault(cls, {}).setdefault(answer, []).append((rec,))
+    # Tighter than the task-wide cap: a question's region words would otherwise let a text-only
+    # rule pick the commonest state per region.
+    picked = [c[0] for c in balance_within_classes(by, n, rng, max_share=R2_2_B_MAX_SHARE)]
     letter_options(picked, rng, answer_style="option")
     return _finish(
         picked, "R2_1_C_{}", "L2_1_C_{}", refined_subtask_id="R2-1-C", original_subtask_id="L2-1-C"
@@ -430,6 +437,15 @@ def relation(subject: tuple[float, float], reference: tuple[float, float]) -> st
     return None
 
 
+def reference_agrees(m: Moment, v: Visible) -> bool:
+    """Whether `v` can be the reference: it has a heading (not a cone) within
+    REFERENCE_HEADING_DEG of the ego's, so its own axes and the ego's give the same sector."""
+    if v.actor.category not in REFERENCE_CATEGORIES:
+        return False
+    diff = (math.degrees(v.actor.yaw - m.ego.yaw) + 180.0) % 360.0 - 180.0
+    return abs(diff) <= REFERENCE_HEADING_DEG
+
+
 def _sector_gap(a: str, b: str) -> float:
     centre = {name: c for c, name in RELATIONS}
     return abs((centre[a] - centre[b] + 180.0) % 360.0 - 180.0)
@@ -450,10 +466,17 @@ def build_r2_3(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
             for p in [unique_point(f, v)]
             if p is not None
         ]
-        for subj, subj_px in objs:
-            for ref, ref_px in objs:
-                if subj.actor.id == ref.actor.id:
+        for i, (a_obj, a_px) in enumerate(objs):
+            for b_obj, b_px in objs[i + 1 :]:
+                # One record per unordered pair, with a reference whose own frame agrees with
+                # the ego's (heading within REFERENCE_HEADING_DEG): both readings of "the car
+                # as a reference frame" then give the same sector.
+                refs = [o for o in (a_obj, b_obj) if reference_agrees(m, o)]
+                if not refs:
                     continue
+                ref = refs[0] if len(refs) == 1 else refs[rng.randrange(2)]
+                subj = b_obj if ref is a_obj else a_obj
+                ref_px, subj_px = (a_px, b_px) if ref is a_obj else (b_px, a_px)
                 sxy = ego_xy(m, subj.actor.x, subj.actor.y)
                 rxy = ego_xy(m, ref.actor.x, ref.actor.y)
                 rel = relation(sxy, rxy)

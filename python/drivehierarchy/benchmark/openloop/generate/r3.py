@@ -149,7 +149,11 @@ def build_r3_1(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
             u, v = target.center_px
             tag = f"<c1,{FRONT},{u:.1f},{v:.1f}>"
             noun = NOUN[a.subtype]
-            desc = f"{noun} wearing {a.colour}" if noun == "pedestrian" else f"{a.colour.capitalize()} {noun}"
+            colour = target.colour  # as the image shows it
+            if noun == "pedestrian":
+                desc = f"{noun} wearing {colour}" if colour else noun
+            else:
+                desc = f"{colour.capitalize()} {noun}" if colour else noun.capitalize()
             rec = {
                 "scene_token": scene_token(m),
                 "frame_token": sample_token(m),

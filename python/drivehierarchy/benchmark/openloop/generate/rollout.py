@@ -63,6 +63,12 @@ IMAGE_SIZE = (1600, 900)  # the original's nuScenes front camera
 # MIN_VISIBLE_PIXELS unoccluded pixels (at 1600×900).
 MIN_VISIBLE_PIXELS = 200
 MIN_VISIBLE_FRACTION = 0.35
+# Dead band: an actor that fails the rule but shows at least DEAD_BAND_SHARE of the pixel
+# minimum, or a part at least DEAD_BAND_PART_PX wide or high (with that many unoccluded
+# pixels), is one a careful person may count: questions it could change are not asked. Below
+# both it is a speck nobody is expected to see.
+DEAD_BAND_SHARE = 0.25
+DEAD_BAND_PART_PX = 40
 
 # nuScenes-like rig (the Rust `CameraConfig::surround_rig`), rendered at IMAGE_SIZE.
 _RIG: dict[str, tuple[float, float, float, float]] = {  # forward, left, yaw, fov
@@ -109,7 +115,9 @@ CATEGORY: dict[str, tuple[str, str]] = {
     "static_object": ("Object", "debris"),
 }
 STOPPED_BELOW_MPS = 0.3
-# Basic colour names and their sRGB anchors (nearest in RGB wins).
+# Basic colour names and their sRGB anchors (nearest in RGB wins): the actor's assigned colour,
+# kept in `ActorState.colour` for the record's meta data only. Question and answer text name
+# the colour the image shows (`pixel_colour_name`).
 COLOURS: tuple[tuple[str, tuple[int, int, int]], ...] = (
     ("white", (235, 235, 235)),
     ("black", (25, 25, 25)),
@@ -128,6 +136,45 @@ COLOURS: tuple[tuple[str, tuple[int, int, int]], ...] = (
 def colour_name(rgb: Sequence[int]) -> str:
     r, g, b = (int(v) for v in rgb)
     return min(COLOURS, key=lambda c: (c[1][0] - r) ** 2 + (c[1][1] - g) ** 2 + (c[1][2] - b) ** 2)[0]
+
+
+# The one palette-to-name mapping for the colour an image shows (docs/openloop-generate.md):
+# the per-channel median of the actor's unoccluded pixels in HSV. Achromatic (saturation below
+# ACHROMATIC_S): black / gray / white by value; chromatic: hue ranges, dark orange-red hues
+# brown. Between two ranges the colour is one people may name either way: no name ("").
+ACHROMATIC_S = 0.20
+CHROMATIC_S = 0.30
+GRAY_V = ((0.0, 0.20, "black"), (0.28, 0.62, "gray"), (0.72, 1.01, "white"))
+HUES = (  # (from, to) degrees, name; red wraps around 0
+    (-15.0, 12.0, "red"),
+    (22.0, 40.0, "orange"),
+    (48.0, 66.0, "yellow"),
+    (80.0, 165.0, "green"),
+    (195.0, 255.0, "blue"),
+    (270.0, 320.0, "purple"),
+)
+BROWN_MAX_V = 0.55  # orange hues this dark read as brown
+DARK_MAX_V = 0.25  # chromatic but this dark: reads as black or a dark colour, not named
+DARK_RED_MAX_V = 0.35  # a red this dark may be called brown: not named
+
+
+def pixel_colour_name(rgb: Sequence[int]) -> str:
+    """The colour name a person gives the median rendered colour `rgb`, or "" in a dead band."""
+    import colorsys
+
+    h, s, v = colorsys.rgb_to_hsv(*(int(c) / 255.0 for c in rgb))
+    if s < ACHROMATIC_S:
+        return next((name for lo, hi, name in GRAY_V if lo <= v < hi), "")
+    if s < CHROMATIC_S or v < DARK_MAX_V:
+        return ""
+    deg = h * 360.0
+    deg = deg - 360.0 if deg >= 345.0 else deg
+    name = next((nm for lo, hi, nm in HUES if lo <= deg < hi), "")
+    if name == "orange" and v < BROWN_MAX_V:
+        return "brown"
+    if name == "red" and v < DARK_RED_MAX_V:
+        return ""  # dark red and brown look alike
+    return name
 
 
 @dataclass(frozen=True)
@@ -215,6 +262,15 @@ class Visible:
     visible_fraction: float
     pixel_count: int  # silhouette pixels
     visible_pixels: int  # unoccluded silhouette pixels
+    # Colour name of the actor's own unoccluded pixels in this image ("" when none fits).
+    colour: str = ""
+
+
+def in_dead_band(v: Visible) -> bool:
+    """Whether an actor failing the visibility rule is still one a person may count."""
+    x0, y0, x1, y1 = v.bbox
+    part = max(x1 - x0, y1 - y0) >= DEAD_BAND_PART_PX and v.visible_pixels >= DEAD_BAND_PART_PX
+    return v.visible_pixels >= DEAD_BAND_SHARE * MIN_VISIBLE_PIXELS or part
 
 
 @dataclass
@@ -235,8 +291,24 @@ class Frame:
         """Content-addressed file name (identical images are stored once)."""
         return f"{hashlib.sha256(self.image).hexdigest()[:20]}.{self.ext}"
 
+    def blocking(self, category: str | Sequence[str]) -> list[Visible]:
+        """Actors of `category` (one or several) in the dead band: they block questions about
+        the category."""
+        cats = (category,) if isinstance(category, str) else tuple(category)
+        return [p for p in self.partial if p.actor.category in cats and in_dead_band(p)]
+
     def visible_of(self, category: str) -> list[Visible]:
         return sorted((v for v in self.visible if v.actor.category == category), key=lambda v: v.distance_m)
+
+
+@dataclass(frozen=True)
+class RouteLight:
+    """The next signal head on the ego's route at one decision: its distance along the route
+    (100 m = none within the state horizon) and its colour (`red`, `yellow`, `green`, or
+    `unknown` when the state only says red-or-yellow and yellow heads exist elsewhere)."""
+
+    distance_m: float
+    colour: str
 
 
 @dataclass
@@ -253,6 +325,11 @@ class Rollout:
     frames: dict[tuple[str, int], Frame] = field(default_factory=dict)
     anchors: list[int] = field(default_factory=list)
     termination: str = ""
+    # Per decision: the route's next signal head (`RouteLight`), from the env's state vector.
+    lights: list[RouteLight] = field(default_factory=list)
+    # Static vehicles by where they stand: id → "kerb" (outside every traffic lane: parked),
+    # "lane" (in a traffic lane: a breakdown, not parked) or "" (in between: not asked about).
+    standing: dict[int, str] = field(default_factory=dict)
 
     def moments(self) -> list[Moment]:
         return [Moment(self, s) for s in self.anchors if s < len(self.states)]
@@ -468,11 +545,55 @@ def _visible(
                 visible_fraction=round(frac, 4),
                 pixel_count=total,
                 visible_pixels=vis,
+                colour=pixel_colour_name(p.get("visible_rgb", (0, 0, 0))) if vis else "",
             )
         )
     out.sort(key=lambda v: (v.distance_m, v.actor.id))
     partial.sort(key=lambda v: (v.distance_m, v.actor.id))
     return out, partial
+
+
+# A static vehicle whose centre lies at most IN_LANE_M from the nearest traffic lane's centre line
+# stands in it; at least KERB_M away (half a lane plus most of a car's width) it stands outside
+# every traffic lane (kerb, bay, shoulder): parked.
+IN_LANE_M = 1.0
+KERB_M = 2.3
+
+
+def where_standing(scenario: str, a: ActorState) -> str:
+    """ "lane", "kerb" or "" (see IN_LANE_M, KERB_M) for a static vehicle of `scenario`."""
+    import tomllib
+
+    from drivehierarchy import _core
+
+    path = Path(scenario)
+    try:
+        text = path.read_text(encoding="utf-8")
+        map_ref = str(tomllib.loads(text).get("map", ""))
+    except (OSError, ValueError):
+        return ""
+    if map_ref and ":" not in map_ref and ("/" in map_ref or map_ref.startswith(".")):
+        map_ref = str((path.parent / map_ref).resolve())
+    try:
+        hit = _core.snap_to_lane(map_ref, a.x, a.y, 10.0, "passenger", True)
+    except Exception:
+        return ""
+    if hit is None:
+        return "kerb"
+    d = float(hit[2])
+    return "lane" if d <= IN_LANE_M else ("kerb" if d >= KERB_M else "")
+
+
+def _route_light(state: Any, i_dist: int, i_stop: int, sim: Any) -> RouteLight:
+    dist = float(state[i_dist])
+    if dist >= 99.0:
+        return RouteLight(dist, "none")
+    if float(state[i_stop]) < 0.5:
+        return RouteLight(dist, "green")
+    # The state says red or yellow; the route's head is not named, so the colour is only known
+    # when no head in the world shows yellow.
+    yellow = any(c == "yellow" for _, _, c in sim.light_states())
+    return RouteLight(dist, "unknown" if yellow else "red")
 
 
 def choose_anchors(seed: int, key: str, n_steps_hint: int, spacing: int, first: int) -> list[int]:
@@ -525,11 +646,19 @@ def rollout(
             for s, cams in frame_plan(picked, a).items():
                 plan.setdefault(s, set()).update(cams)
         cfgs = {name: camera_config(name, size) for name in SURROUND}
+        from drivehierarchy.envs.r4 import STATE_FIELDS
+
+        i_dist = STATE_FIELDS.index("light_ahead_distance_m")
+        i_stop = STATE_FIELDS.index("light_ahead_stop")
         step = 0
         while True:
             ego = sim.ego_array()
             actors = {int(v["id"]): actor_state(v) for v in sim.actor_views()}
             ro.states.append((float(sim.time_s), EgoState(*(float(x) for x in ego[:4])), actors))
+            ro.lights.append(_route_light(obs["state"], i_dist, i_stop, sim))
+            for st in actors.values():
+                if st.motion == "static" and st.category == "Vehicle" and st.id not in ro.standing:
+                    ro.standing[st.id] = where_standing(str(scenario), st)
             exp = sim.expert_action()
             ro.expert_actions.append((float(exp[0]), float(exp[1])))
             for cam in sorted(plan.get(step, ())):

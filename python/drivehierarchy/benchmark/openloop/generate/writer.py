@@ -191,8 +191,12 @@ def generate(
     drivers: tuple[str, ...] = DRIVERS,
     jobs: int = 2,
     progress: bool = False,
+    strict: bool | None = None,
 ) -> dict[str, Any]:
-    """Writes the question set; returns the summary also written to `generation.json`."""
+    """Writes the question set; returns the summary also written to `generation.json`, with
+    the quality table (`quality`: text-only prior against chance, balance and diversity per
+    task). With `strict` (default: from `quality.PRIOR_STRICT_MIN_RECORDS` records per task on)
+    a task whose table row names a problem fails the set after it is written."""
     from drivehierarchy.benchmark.openloop.records import TASK_FILE_STEM
 
     if per_task < 1:
@@ -235,9 +239,14 @@ def generate(
         ],
         "tasks": {},
     }
+    cat_of = {r.scenario_id: r.category for r in rollouts}
+    built: dict[str, list[dict[str, Any]]] = {}
+    cats: dict[str, set[str]] = {}
     for task, (build, _) in registry.items():
         rng = random.Random(f"{seed}|{split}|{task}")
         recs = build(moments, per_task, rng)
+        built[task] = recs
+        cats[task] = {cat_of.get(quality.scene_of(r), "") for r in recs} - {""}
         lines = []
         for rec in recs:
             frames: list[Frame] = rec.pop("_frames", [])
@@ -259,7 +268,20 @@ def generate(
             if p.is_file() and p.name not in written:
                 p.unlink()
     summary["images"] = len(written)
+    rows = quality.quality_rows(built, cats)
+    summary["quality"] = rows
+    summary["scenario_categories"] = sorted(set(cat_of.values()))
     (out / "generation.json").write_text(
         json.dumps(summary, indent=2, ensure_ascii=False) + "\n", encoding="utf-8"
     )
+    if strict is None:
+        strict = per_task >= quality.PRIOR_STRICT_MIN_RECORDS
+    bad = [r for r in rows if r["problems"]]
+    if strict and bad:
+        raise quality.QualityError(
+            f"{out}: the set fails its quality checks:\n"
+            + "\n".join(f"  {r['task']}: {'; '.join(r['problems'])}" for r in bad)
+            + "\n"
+            + quality.format_table(rows)
+        )
     return summary

@@ -1,0 +1,171 @@
+"""The rules that decide what a generated question may say, on hand-made inputs (issue 33):
+R1_4's action from the frames shown (a sustained turn, not a weave), colour words from rendered
+pixels, R2_3's reference heading, the per-class yes/no balance, the per-image cap, the text-only
+prior check and the review sheet's verdict file."""
+
+from __future__ import annotations
+
+import json
+import math
+import random
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from drivehierarchy.benchmark.openloop.generate import quality, r1
+from drivehierarchy.benchmark.openloop.generate.rollout import pixel_colour_name
+
+REPO = Path(__file__).resolve().parents[3]
+
+
+# -- R1_4: the ego's action over the frames shown ------------------------------------------------
+def test_a_turn_needs_a_sustained_yaw_rate() -> None:
+    steady_left = [math.radians(2.5 * k) for k in range(9)]  # 20° over 2 s, every step left
+    assert r1.ego_turn(steady_left) == "left"
+    assert r1.ego_turn([-y for y in steady_left]) == "right"
+    assert r1.ego_turn([0.0] * 9) == "straight"
+    weave = [math.radians(v) for v in (0, 4, 8, 4, 0, 4, 8, 12, 16)]  # back and forth, then left
+    assert r1.ego_turn(weave) is None
+    late_flick = [0.0] * 7 + [math.radians(10), math.radians(18)]  # one noisy step at the end
+    assert r1.ego_turn(late_flick) is None
+    slight_bend = [math.radians(1.0 * k) for k in range(9)]  # 8°: neither straight nor a turn
+    assert r1.ego_turn(slight_bend) is None
+
+
+def test_speed_action_uses_the_frames_shown_only() -> None:
+    assert r1.ego_speed_action([8.0] * 9) == "steady"
+    assert r1.ego_speed_action([8.0 - 0.5 * k for k in range(9)]) == "slowing"
+    assert r1.ego_speed_action([2.0 + 0.5 * k for k in range(9)]) == "speeding"
+    assert r1.ego_speed_action([0.0] * 9) == "stopped"
+    # Slowed down, then speeding up again in the last second: neither class.
+    assert r1.ego_speed_action([8, 7, 6, 5, 4, 4.2, 4.4, 4.6, 4.8]) is None
+
+
+# -- colour words ---------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("rgb", "name"),
+    [
+        ((230, 230, 232), "white"),
+        ((120, 122, 128), "gray"),
+        ((20, 20, 22), "black"),
+        ((190, 30, 30), "red"),
+        ((30, 60, 190), "blue"),
+        ((40, 150, 50), "green"),
+        ((230, 200, 40), "yellow"),
+        ((240, 130, 30), "orange"),
+        ((110, 70, 35), "brown"),
+        ((170, 171, 174), ""),  # between gray and white: no word
+        ((70, 25, 25), ""),  # dark red or brown
+    ],
+)
+def test_colour_names_follow_the_rendered_pixels(rgb: tuple[int, int, int], name: str) -> None:
+    assert pixel_colour_name(rgb) == name
+
+
+# -- balancing ------------------------------------------------------------------------------------
+def _rec(img: str, q: str, a: str) -> tuple[dict[str, Any], list[Any]]:
+    return ({"image_path": img, "question": q, "answer": a}, [])
+
+
+def test_yes_no_is_half_and_half_within_every_class() -> None:
+    groups = {
+        "Vehicle": (
+            [_rec(f"v{i}", "car?", "Yes") for i in range(50)],
+            [_rec(f"w{i}", "car?", "No") for i in range(5)],
+        ),
+        "Pedestrian": (
+            [_rec(f"p{i}", "ped?", "Yes") for i in range(5)],
+            [_rec(f"q{i}", "ped?", "No") for i in range(50)],
+        ),
+    }
+    out = quality.balance_binary_by(groups, 40, random.Random(0))
+    for q in ("car?", "ped?"):
+        answers = [r[0]["answer"] for r in out if r[0]["question"] == q]
+        assert answers.count("Yes") == answers.count("No") == 5
+
+
+def test_an_image_serves_at_most_two_records() -> None:
+    groups = {
+        "a": [_rec("same.jpg", f"q{i}", "x") for i in range(10)],
+        "b": [_rec(f"{i}.jpg", "q", "y") for i in range(10)],
+    }
+    out = quality.balance_groups(groups, 20, random.Random(0))
+    assert sum(1 for r in out if r[0]["image_path"] == "same.jpg") == 2
+
+
+def test_max_share_caps_one_answer() -> None:
+    groups = {
+        "straight": [_rec(f"s{i}", "q", "s") for i in range(100)],
+        "turn": [_rec(f"t{i}", "q", "t") for i in range(10)],
+        "stop": [_rec(f"x{i}", "q", "x") for i in range(10)],
+    }
+    out = quality.balance_groups(groups, 100, random.Random(0), max_share=0.4)
+    n_straight = sum(1 for r in out if r[0]["answer"] == "s")
+    assert n_straight <= 0.4 * len(out) + 1e-9 and len(out) == 33
+    # Two answers: no share can be below a half.
+    two = {k: groups[k] for k in ("straight", "turn")}
+    out = quality.balance_groups(two, 100, random.Random(0), max_share=0.4)
+    assert len(out) == 20
+
+
+# -- the text-only prior --------------------------------------------------------------------------
+def _existence(i: int, cat: str, yes: bool) -> dict[str, Any]:
+    return {
+        "Question_id": f"R1_1_A_{i}",
+        "scene_token": f"scene{i % 20}",
+        "question": f"Is there any {cat} visible in CAM_FRONT?",
+        "answer": "Yes" if yes else "No",
+        "image_path": f"images/{i}.jpg",
+    }
+
+
+def test_the_prior_check_finds_a_class_shortcut() -> None:
+    # "Yes for Vehicle, No for everything else": the issue's 94 % shortcut.
+    recs = [_existence(i, cat, cat == "Vehicle") for i in range(200) for cat in ("Vehicle", "Pedestrian")]
+    p = quality.prior_check("R1_1_A", recs)
+    assert p["prior"] == 100.0 and p["chance"] == 50.0
+    rows = quality.quality_rows({"R1_1_A": recs}, {})
+    assert any("text-only prior" in x for x in rows[0]["problems"])
+    # Balanced within each class: the question says nothing.
+    fair = [_existence(i, cat, i % 2 == 0) for i in range(200) for cat in ("Vehicle", "Pedestrian")]
+    p = quality.prior_check("R1_1_A", fair)
+    assert abs(p["prior"] - p["chance"]) <= 15.0
+
+
+# -- the review sheet's verdicts ------------------------------------------------------------------
+def test_review_verdicts_are_recorded_beside_the_sheet(tmp_path: Path) -> None:
+    out = tmp_path / "review"
+    out.mkdir()
+    (out / "verdicts.json").write_text(
+        json.dumps(
+            {
+                "data_dir": "x",
+                "seed": 3,
+                "n": 2,
+                "records": [
+                    {"id": "R1_1_A_0", "task": "R1_1_A", "verdict": None, "reason": ""},
+                    {"id": "R2_3_1", "task": "R2_3", "verdict": None, "reason": ""},
+                ],
+            }
+        ),
+        encoding="utf-8",
+    )
+    script = REPO / "scripts" / "review_generated.py"
+
+    def run(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [sys.executable, str(script), "x", "--out", str(out), *args], capture_output=True, text=True
+        )
+
+    assert run("--verdict", "R1_1_A_0", "correct").returncode == 0
+    assert run("--verdict", "R2_3_1", "wrong").returncode != 0  # a reason is required
+    assert run("--verdict", "R2_3_1", "wrong", "subject is Front-Left").returncode == 0
+    bad = run("--verdict", "R2_3_1", "maybe", "x")
+    assert bad.returncode != 0 and "expected one of" in bad.stderr
+    data = json.loads((out / "verdicts.json").read_text(encoding="utf-8"))
+    assert [r["verdict"] for r in data["records"]] == ["correct", "wrong"]
+    table = run("--table").stdout
+    assert "| R2_3 | 0 | 1 | 0 | 0 | 0 |" in table and "review seed 3" in table
