@@ -10,6 +10,7 @@ mod json;
 mod network;
 mod sumo_native;
 mod traffic;
+mod vector;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -19,5 +20,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     editor::register(m)?;
     benchmark::register(m)?;
     network::register(m)?;
+    vector::register(m)?;
     Ok(())
 }
