@@ -22,6 +22,8 @@ import numpy as np
 import drivehierarchy  # noqa: F401  (registers DriveHierarchy-R4)
 
 SCENARIO = "07_sudden_brake/town01_07_lead_brakes"
+# Fresh worker processes: forking a process that has run thread pools (ours, BLAS) can deadlock.
+START_METHOD = "spawn"
 
 
 def env_kwargs(bev: bool) -> dict[str, Any]:
@@ -35,9 +37,11 @@ def env_kwargs(bev: bool) -> dict[str, Any]:
 
 def make_single(bev: bool) -> Callable[[], gym.Env[Any, Any]]:
     def make() -> gym.Env[Any, Any]:
-        import drivehierarchy.envs  # noqa: F401  (registers the id in a spawned worker)
+        # Imported here: the package registers the id in a spawned worker.
+        from drivehierarchy.envs.vector_native import DropNoneInfo
 
-        return gym.make("DriveHierarchy-R4", **env_kwargs(bev))
+        # The infos the native env returns (and what Gymnasium needs to batch them).
+        return DropNoneInfo(gym.make("DriveHierarchy-R4", **env_kwargs(bev)))
 
     return make
 
@@ -73,7 +77,7 @@ def bench_native(n: int, bev: bool, seconds: float) -> float:
 
 
 def bench_async(n: int, bev: bool, seconds: float) -> float:
-    env = gym.vector.AsyncVectorEnv([make_single(bev)] * n)
+    env = gym.vector.AsyncVectorEnv([make_single(bev)] * n, context=START_METHOD)
     env.reset(seed=0)
     try:
         return time_loop(env.step, n, seconds)
@@ -86,7 +90,7 @@ def bench_subproc(n: int, bev: bool, seconds: float) -> float | None:
         from stable_baselines3.common.vec_env import SubprocVecEnv
     except ImportError:
         return None
-    env = SubprocVecEnv([make_single(bev)] * n)
+    env = SubprocVecEnv([make_single(bev)] * n, start_method=START_METHOD)
     env.seed(0)
     env.reset()
     try:

@@ -11,7 +11,7 @@ import pytest
 
 import drivehierarchy  # noqa: F401  (registers the id)
 from drivehierarchy import ConfigError
-from drivehierarchy.envs.vector_native import DriveHierarchyR4VectorEnv, drop_none
+from drivehierarchy.envs.vector_native import DriveHierarchyR4VectorEnv, DropNoneInfo
 
 SCENARIO = "03_turning/town01_03_right_turn_signalised"
 OTHER = "07_sudden_brake/town01_07_lead_brakes"
@@ -29,22 +29,9 @@ def native(n: int, **kw: Any) -> DriveHierarchyR4VectorEnv:
     return env
 
 
-class NoneAsAbsent(gym.Wrapper[Any, Any, Any, Any]):
-    """The native vector env's one departure from the single env: `None` info values are absent
-    (Gymnasium cannot batch `reply=None` beside `reply={...}`; `SyncVectorEnv` fails on it)."""
-
-    def reset(self, **kw: Any) -> Any:
-        obs, info = self.env.reset(**kw)
-        return obs, drop_none(info)
-
-    def step(self, action: Any) -> Any:
-        *rest, info = self.env.step(action)
-        return (*rest, drop_none(info))
-
-
 def sync(n: int, scenarios: list[str] | None = None, **kw: Any) -> gym.vector.SyncVectorEnv:
     scenarios = scenarios or [SCENARIO] * n
-    fns = [lambda s=s: NoneAsAbsent(gym.make("DriveHierarchy-R4", scenario=s, **kw)) for s in scenarios]
+    fns = [lambda s=s: DropNoneInfo(gym.make("DriveHierarchy-R4", scenario=s, **kw)) for s in scenarios]
     return gym.vector.SyncVectorEnv(fns)
 
 

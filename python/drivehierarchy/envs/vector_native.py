@@ -78,6 +78,20 @@ def drop_none(info: dict[str, Any]) -> dict[str, Any]:
     return {k: drop_none(v) if isinstance(v, dict) else v for k, v in info.items() if v is not None}
 
 
+class DropNoneInfo(gym.Wrapper[dict[str, Any], np.ndarray, dict[str, Any], np.ndarray]):
+    """A single env whose infos go through `drop_none`: what Gymnasium's `SyncVectorEnv` and
+    `AsyncVectorEnv` need to batch `DriveHierarchy-R4` across autoresets (they fail on
+    `reply=None` beside `reply={...}`), and what the native vector env's infos equal."""
+
+    def reset(self, **kwargs: Any) -> tuple[dict[str, Any], dict[str, Any]]:
+        obs, info = self.env.reset(**kwargs)
+        return obs, drop_none(info)
+
+    def step(self, action: Any) -> tuple[dict[str, Any], Any, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        return obs, reward, terminated, truncated, drop_none(info)
+
+
 class DriveHierarchyR4VectorEnv(VectorEnv[dict[str, Any], np.ndarray, np.ndarray]):
     """N `DriveHierarchy-R4` episodes stepped in Rust on a thread pool (see the module docs).
 
