@@ -152,6 +152,12 @@ def test_sumo_traffic_is_refused_with_the_scenario_named() -> None:
         ConfigError, match=r"traffic.*'sumo'.*town01_03_right_turn_signalised.*traffic=\"native\""
     ):
         native(2, scenario=SCENARIO, front=None, bev=None, traffic="sumo")
+    # A scenario whose own `[traffic]` mode is SUMO: refused by default, runs with native IDM.
+    sumo_scenario = "06_traffic_flow/bs3d_09_left_turner_queue"
+    with pytest.raises(ConfigError, match="bs3d_09_left_turner_queue"):
+        native(2, scenario=sumo_scenario, front=None, bev=None)
+    env = native(2, scenario=sumo_scenario, **NO_IMAGES)
+    assert env.reset(seed=0)[0]["state"].shape[0] == 2
 
 
 def test_bad_actions_and_lifecycle_errors() -> None:
