@@ -3,6 +3,7 @@
 //! Data flows one way: scenario file → world → observation (images, prompt, state) → agent →
 //! action → actuation bridge → world. Scoring reads the world's event stream.
 
+pub mod batch;
 pub mod drive;
 pub mod error;
 pub mod geom;

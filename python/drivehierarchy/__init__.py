@@ -33,7 +33,12 @@ def register_envs() -> None:
     from gymnasium.envs.registration import register, registry
 
     if R4_ENV_ID not in registry:
-        register(id=R4_ENV_ID, entry_point="drivehierarchy.envs.r4:DriveHierarchyR4Env")
+        register(
+            id=R4_ENV_ID,
+            entry_point="drivehierarchy.envs.r4:DriveHierarchyR4Env",
+            # gymnasium.make_vec(..., vectorization_mode="vector_entry_point"): N worlds in Rust.
+            vector_entry_point="drivehierarchy.envs.vector_native:DriveHierarchyR4VectorEnv",
+        )
 
 
 register_envs()

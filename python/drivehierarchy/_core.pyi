@@ -141,6 +141,31 @@ LIBSUMO_SUMO_SHIM: Final[str]
 TRACI_SUMO_SHIM: Final[str]
 
 @final
+class SimBatch:
+    """N R4 episodes stepped on a rayon pool with the GIL released (the native vector env)."""
+
+    def __new__(
+        cls,
+        scenarios: list[str],
+        config: Mapping[str, Any] | SimConfigDict,
+        traffic: str | None = None,
+        sumo_home: str | PathLike[str] | None = None,
+        threads: int = 0,
+    ) -> SimBatch: ...
+    def load(self, index: int, path: str) -> None: ...
+    def __len__(self) -> int: ...
+    @property
+    def scenario_ids(self) -> list[str]: ...
+    @property
+    def traffic(self) -> list[str | None]: ...
+    def score(self, index: int) -> dict[str, Any]: ...
+    def run(
+        self,
+        resets: list[tuple[int, int] | None],
+        actions: NDArray[np.float64] | None = None,
+    ) -> tuple[dict[str, Any], NDArray[np.float64], NDArray[np.bool_], list[dict[str, Any]]]: ...
+
+@final
 class SumoSession:
     """One SUMO co-simulation's session: its transport and SUMO's lifecycle."""
 

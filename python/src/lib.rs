@@ -13,6 +13,7 @@ mod render_facts;
 mod sumo_home;
 mod sumo_native;
 mod traffic;
+mod vector;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -25,5 +26,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     network::register(m)?;
     sumo_home::register(m)?;
     render_facts::register(m)?;
+    vector::register(m)?;
     Ok(())
 }
