@@ -75,12 +75,18 @@ def _time_reset(scenario: str, traffic: str, after: Any = None, backend: str = "
 def _fresh_copy(scenario: str, tmp: Path) -> str:
     """The scenario with its map copied to `tmp`: a path the process's map cache has not seen,
     so constructing it times the map's parse alone (the process is already initialised)."""
-    from drivehierarchy.scenarios import sumo_home
+    from drivehierarchy.scenarios import builtin_root, sumo_home
 
     src = Path(scenario).resolve()
     text = src.read_text(encoding="utf-8")
     ref = str(tomllib.loads(text)["map"])
-    net = Path(str(sumo_home())) / ref.removeprefix("sumo:") if ref.startswith("sumo:") else src.parent / ref
+    if ref.startswith("builtin:"):
+        name = ref.removeprefix("builtin:")
+        net = builtin_root() / "maps" / name / f"{name}.net.xml"
+    elif ref.startswith("sumo:"):
+        net = Path(str(sumo_home())) / ref.removeprefix("sumo:")
+    else:
+        net = src.parent / ref
     copy = tmp / net.name
     shutil.copyfile(net, copy)
     text = re.sub(r'(?m)^map\s*=\s*"[^"]*"', f"map = {json.dumps(str(copy))}", text)

@@ -404,9 +404,7 @@ def test_official_positions_match_the_reference_points(
     assert doc["ego"]["route_edges"] == data["hero"]["route_edges"]
     slaves = [a for a in data["background_vehicles"] if a["role"] == "slave"]
     assert [v["route"] for v in doc["traffic"]["vehicles"]] == [a["route_edges"] for a in slaves]
-    summary = json.loads(
-        _core.validate_scenario(str(out / "01_pedestrian" / "SC20260319211139GNGY.toml"), sumo_home())
-    )
+    summary = _core.validate_scenario(str(out / "01_pedestrian" / "SC20260319211139GNGY.toml"), sumo_home())
     assert summary["actors"] == len(peds)
 
 

@@ -26,6 +26,7 @@ QUICK: dict[str, str] = {
     "bench_render.py": "--quick --no-pin",
     "bench_suite_load.py": "--quick",
     "bench_sumo.py": "--quick",
+    "bench_vector.py": "--quick",
     "bench_vlm_harness.py": "--quick",
     "gen_pyunicode_tables.py": "--quick",
     "soak.py": "--quick --out {tmp}/soak",

@@ -123,7 +123,7 @@ def test_generated_open_loop_set_end_to_end_against_a_real_server(
     data, run, r4 = tmp_path / "generated", tmp_path / "tiny", tmp_path / "tiny_r4"
     suite = short_scenarios(1)[0]
     assert main(["openloop", "generate", "--suite", str(suite.parent.parent), "--out", str(data),
-                 "--per-task", "1", "--no-progress"]) == 0  # fmt: skip
+                 "--per-task", "4", "--no-progress"]) == 0  # fmt: skip
     files = sorted(p.name for p in data.glob("*.jsonl"))
     assert len(files) == 14
     argv = ["openloop", "predict", "--base-url", url, "--model", model, "--data-dir", str(data)]
@@ -131,7 +131,10 @@ def test_generated_open_loop_set_end_to_end_against_a_real_server(
     errors = run / "errors.jsonl"
     assert main(argv) == 0, errors.read_text()[:3000] if errors.exists() else "no errors.jsonl"
     lines = [json.loads(x) for p in (run / "predictions").glob("*.jsonl") for x in p.read_text().splitlines()]
-    assert len(lines) == 14 and all(isinstance(x["prediction"], str) for x in lines)
+    # One scene does not give every task a record under the generator's visibility and cue rules
+    # (docs/openloop-generate.md): every record it wrote is predicted.
+    records = [x for p in data.glob("*.jsonl") for x in p.read_text().splitlines() if x.strip()]
+    assert len(lines) == len(records) > 0 and all(isinstance(x["prediction"], str) for x in lines)
     assert main(["openloop", "score", str(run), "--skip-l1-4"]) == 0
     final = json.loads((run / "evaluation" / "final_score.json").read_text())
     assert set(final["ranks"]) == {"R1", "R2", "R3"}
