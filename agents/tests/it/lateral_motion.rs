@@ -94,7 +94,7 @@ fn max_lateral_step(
 
 #[test]
 fn no_vehicle_jumps_sideways_in_any_traffic_mode() {
-    let home = dh_env::scenario::discover_sumo_home();
+    let home = dh_env::sumo_home::SumoHome::locate().map(|h| h.0);
     let opts = LoadOptions { sumo_home: home, cache: Some(Default::default()) };
     let sumo = sumo_home();
     let mut failures = Vec::new();

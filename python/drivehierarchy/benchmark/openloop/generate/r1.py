@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from . import quality
-from .rollout import FRONT, IMAGE_SIZE, Frame, Moment, Needs, Visible, register
+from .rollout import FRONT, IMAGE_SIZE, WHOLE_FIGURE, Frame, Moment, Needs, Visible, register
 
 CATEGORIES = ("Vehicle", "Pedestrian", "Bicycle", "Traffic Cone")
 PLURAL = {
@@ -198,7 +198,7 @@ def frame_status(m: Moment, f: Frame, v: Visible) -> str | None:
     a = v.actor
     bw, bh = v.bbox[2] - v.bbox[0], v.bbox[3] - v.bbox[1]
     if a.category == "Pedestrian":
-        if bh < POSE_BOX_PX:
+        if bh < POSE_BOX_PX or v.visible_fraction < WHOLE_FIGURE:
             return None
         if a.speed_mps >= PED_WALKING_MPS:
             return "moving"
@@ -397,6 +397,8 @@ def _motion_phrase(m: Moment, f: Frame, v: Visible) -> str | None:
     slow or stopped vehicle whose lamps the camera cannot see, a person at a shuffle)."""
     a = v.actor
     if a.category == "Pedestrian":
+        if v.visible_fraction < WHOLE_FIGURE:
+            return None
         if a.speed_mps >= PED_WALKING_MPS:
             return "walking"
         return "standing still" if a.speed_mps <= STILL_MPS else None

@@ -21,7 +21,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from .r2 import _balance_by, _finish, image_path, point_is_unique, sample_token, scene_token
-from .rollout import FRONT, Moment, Needs, register
+from .rollout import FRONT, WHOLE_FIGURE, Moment, Needs, register
 
 HORIZON_S = 3.0
 # Actors farther than this are a few pixels wide: not asked about.
@@ -136,6 +136,8 @@ def build_r3_1(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
             if len(future) < steps:
                 continue  # left the world before the horizon: its outcome is not known
             if a.category == "Pedestrian":
+                if target.visible_fraction < WHOLE_FIGURE:
+                    continue  # walking or standing cannot be told from a cut-off figure
                 outcome = pedestrian_outcome(a.speed_mps, a.yaw, future)
                 pool = PEDESTRIAN_DISTRACTORS.get(outcome or "", ())
             else:

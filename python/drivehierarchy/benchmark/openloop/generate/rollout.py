@@ -251,6 +251,11 @@ def actor_state(v: dict[str, Any]) -> ActorState:
     )
 
 
+# A person's gait is a cue only when the whole figure shows: a figure cut by the image border or
+# hidden behind something (legs out of view) looks the same walking or standing (R1_1_C, R3_1).
+WHOLE_FIGURE = 0.9
+
+
 @dataclass(frozen=True)
 class Visible:
     """An actor as one camera shows it (passes the visibility rule)."""
