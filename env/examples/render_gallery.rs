@@ -135,7 +135,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // Vehicles: rear three-quarter view in the ego lane (15 m, braking) and head-on in the
     // oncoming lane (60 m).
     shot.md.push("\n### Vehicles\n\n| body | 15 m, ahead, braking | 60 m, oncoming |\n|---|---|---|".into());
-    let bodies: [(&str, ActorKind, f64, f64, f64, [u8; 3]); 5] = [
+    // (name, kind, length, width, height in metres, colour)
+    type Body = (&'static str, ActorKind, f64, f64, f64, [u8; 3]);
+    let bodies: [Body; 5] = [
         ("sedan", ActorKind::Car, 4.6, 1.85, 1.45, [200, 32, 32]),
         ("suv", ActorKind::Car, 4.8, 1.95, 1.75, [166, 167, 169]),
         ("van", ActorKind::Car, 5.4, 2.05, 2.35, [240, 240, 238]),
