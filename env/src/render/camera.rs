@@ -363,7 +363,7 @@ pub(crate) fn dynamic_tris(
     out: &mut Vec<Tri3>,
 ) {
     if draw_ego {
-        mesh::actor(out, frame.ego, map.origin, u32::MAX, true);
+        super::actors::actor(out, frame.ego, map.origin, u32::MAX, true);
     }
     for (i, a) in frame.actors.iter().enumerate() {
         if a.id == frame.ego.id && a.pose == frame.ego.pose {
@@ -373,7 +373,7 @@ pub(crate) fn dynamic_tris(
             continue;
         }
         let near = a.pose.pos.dist(frame.ego.pose.pos) < DETAIL_M;
-        mesh::actor(out, a, map.origin, i as u32 + 1, near);
+        super::actors::actor(out, a, map.origin, i as u32 + 1, near);
     }
     for l in frame.lights {
         let place = map.signal_places.get(&l.lane_id);
@@ -566,7 +566,13 @@ impl Renderer {
                 continue;
             }
             tris.clear();
-            mesh::actor(&mut tris, a, map.origin, stamp, a.pose.pos.dist(frame.ego.pose.pos) < DETAIL_M);
+            super::actors::actor(
+                &mut tris,
+                a,
+                map.origin,
+                stamp,
+                a.pose.pos.dist(frame.ego.pose.pos) < DETAIL_M,
+            );
             let mut total = 0usize;
             // Projected area of the whole silhouette and of its part inside the image (faces
             // overlap in both sums alike): the share the image border cuts off counts as hidden.

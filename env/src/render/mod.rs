@@ -11,6 +11,7 @@
 //!   [`Image`]s using a thread-local [`Renderer`] (its scratch buffers are reused); hold your own
 //!   [`Renderer`] to control where scratch memory lives.
 
+mod actors;
 mod bev;
 mod camera;
 mod frame;
@@ -19,6 +20,8 @@ mod image;
 mod map;
 mod mesh;
 pub mod palette;
+#[cfg(test)]
+mod palette_tests;
 mod people;
 mod raster;
 #[cfg(test)]
