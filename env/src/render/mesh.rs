@@ -251,7 +251,7 @@ pub(crate) fn scale(c: [u8; 3], k: f32) -> [u8; 3] {
 
 impl Mesh<'_> {
     #[allow(clippy::too_many_arguments)]
-    fn out_lamp(
+    pub(crate) fn out_lamp(
         &mut self,
         fr: &Frame,
         fwd: f32,

@@ -4,7 +4,7 @@
 use super::palette::*;
 use crate::geom::{Pose, Vec2};
 use crate::map::Network;
-use crate::render::mesh::{self, dot, LIT_MIN_COS, PAINT_BIT, SUN};
+use crate::render::mesh::{dot, LIT_MIN_COS, PAINT_BIT, SUN};
 use crate::render::{CameraConfig, FrameInput, RenderMap, Renderer};
 use crate::view::{ActorKind, ActorView};
 
