@@ -45,6 +45,28 @@ class EpisodeNotStarted(SimulationError, gym.error.ResetNeeded):
     `SimulationError` like every other failure of the world."""
 
 
+def single_spaces(config: R4Config) -> tuple[spaces.Dict, spaces.Box]:
+    """The observation and action spaces of one env with `config` (the single env's, and the
+    native vector env's per-env spaces)."""
+    obs: dict[str, spaces.Space[Any]] = {}
+    if config.front is not None:
+        obs["front"] = spaces.Box(0, 255, (config.front.height, config.front.width, 3), np.uint8)
+    if config.bev is not None:
+        obs["bev"] = spaces.Box(0, 255, (config.bev.size_px, config.bev.size_px, 3), np.uint8)
+    if config.prompt:
+        obs["prompt"] = spaces.Text(max_length=PROMPT_MAX_CHARS, min_length=0, charset=PROMPT_CHARSET)
+    obs["state"] = spaces.Box(-STATE_BOUND, STATE_BOUND, (len(STATE_FIELDS),), np.float32)
+    if config.action_mode == "decision":
+        action = spaces.Box(
+            np.array([-1.0, 0.0], np.float32), np.array([1.0, 30.0], np.float32), dtype=np.float32
+        )
+    else:
+        action = spaces.Box(
+            np.array([0.0, 0.0, -1.0], np.float32), np.array([1.0, 1.0, 1.0], np.float32), dtype=np.float32
+        )
+    return spaces.Dict(obs), action
+
+
 class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
     """The DriveHierarchy R4 closed-loop rank: one scenario of the suite (or any scenario file).
 
@@ -110,27 +132,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         self._scenario_text = scenario_text
         self._load(config.scenario)
 
-        obs: dict[str, spaces.Space[Any]] = {}
-        if config.front is not None:
-            obs["front"] = spaces.Box(0, 255, (config.front.height, config.front.width, 3), np.uint8)
-        if config.bev is not None:
-            obs["bev"] = spaces.Box(0, 255, (config.bev.size_px, config.bev.size_px, 3), np.uint8)
-        if config.prompt:
-            obs["prompt"] = spaces.Text(max_length=PROMPT_MAX_CHARS, min_length=0, charset=PROMPT_CHARSET)
-        obs["state"] = spaces.Box(-STATE_BOUND, STATE_BOUND, (len(STATE_FIELDS),), np.float32)
-        self.observation_space = spaces.Dict(obs)
-        if config.action_mode == "decision":
-            # [steer (negative = left), target_speed_mps]
-            self.action_space = spaces.Box(
-                np.array([-1.0, 0.0], np.float32), np.array([1.0, 30.0], np.float32), dtype=np.float32
-            )
-        else:
-            # [throttle, brake, steer]
-            self.action_space = spaces.Box(
-                np.array([0.0, 0.0, -1.0], np.float32),
-                np.array([1.0, 1.0, 1.0], np.float32),
-                dtype=np.float32,
-            )
+        self.observation_space, self.action_space = single_spaces(config)
         self._last_frame: np.ndarray | None = None
 
     # -- loading -------------------------------------------------------------------------

@@ -27,7 +27,6 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
@@ -36,36 +35,12 @@ from drivehierarchy import _core
 from drivehierarchy._core import ConfigError
 from drivehierarchy.envs.config import R4Config
 from drivehierarchy.envs.r4 import (
-    PROMPT_CHARSET,
-    PROMPT_MAX_CHARS,
-    STATE_BOUND,
-    STATE_FIELDS,
     _shallow,
+    single_spaces,
 )
 from drivehierarchy.scenarios import resolve_scenario, sumo_home
 
 _SEED_BOUND = 2**63 - 1  # the single env's world-seed draw: np_random.integers(0, 2**63 - 1)
-
-
-def single_spaces(config: R4Config) -> tuple[spaces.Dict, spaces.Box]:
-    """The observation and action spaces of one `DriveHierarchyR4Env` with `config`."""
-    obs: dict[str, spaces.Space[Any]] = {}
-    if config.front is not None:
-        obs["front"] = spaces.Box(0, 255, (config.front.height, config.front.width, 3), np.uint8)
-    if config.bev is not None:
-        obs["bev"] = spaces.Box(0, 255, (config.bev.size_px, config.bev.size_px, 3), np.uint8)
-    if config.prompt:
-        obs["prompt"] = spaces.Text(max_length=PROMPT_MAX_CHARS, min_length=0, charset=PROMPT_CHARSET)
-    obs["state"] = spaces.Box(-STATE_BOUND, STATE_BOUND, (len(STATE_FIELDS),), np.float32)
-    if config.action_mode == "decision":
-        action = spaces.Box(
-            np.array([-1.0, 0.0], np.float32), np.array([1.0, 30.0], np.float32), dtype=np.float32
-        )
-    else:
-        action = spaces.Box(
-            np.array([0.0, 0.0, -1.0], np.float32), np.array([1.0, 1.0, 1.0], np.float32), dtype=np.float32
-        )
-    return spaces.Dict(obs), action
 
 
 def drop_none(info: dict[str, Any]) -> dict[str, Any]:
