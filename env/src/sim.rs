@@ -18,7 +18,7 @@ use crate::geom::{wrap_angle, Pose, Vec2};
 use crate::render::{BevConfig, CameraConfig, FrameInput, Image, RenderMap};
 use crate::scenario::{LoadOptions, ResolvedScenario, Scenario};
 use crate::score::{
-    Contact, LogLine, RunFooter, RunHeader, RunInfo, SceneScore, ScoreParams, ScoreTracker, TickInput,
+    Contact, RunFooter, RunHeader, RunInfo, RunLog, SceneScore, ScoreParams, ScoreTracker, TickInput,
     TrajectorySample,
 };
 use crate::view::{ActorView, LightColor, SignView, TrafficLightView};
@@ -524,9 +524,9 @@ impl Sim {
         }))
     }
 
-    /// The run log (JSONL: header, one line per tick, end) from which [`crate::score::rescore`]
+    /// The run log (header, one sample per tick, end) from which [`crate::score::rescore`]
     /// recomputes the score without simulating.
-    pub fn episode_log(&self) -> Result<String> {
+    pub fn run_log(&self) -> Result<RunLog> {
         let ep = self.episode.as_ref().ok_or_else(not_started)?;
         let header = RunHeader::new(
             self.scenario.id.clone(),
@@ -537,22 +537,18 @@ impl Sim {
             self.params.clone(),
         )
         .with_scenario(Some(self.scenario.scenario_duration_s()), ep.start_on_road);
-        let mut out = String::with_capacity(128 * (ep.samples.len() + 2));
-        out.push_str(&LogLine::Header(Box::new(header)).to_json());
-        out.push('\n');
-        for s in &ep.samples {
-            out.push_str(&LogLine::Tick(s.clone()).to_json());
-            out.push('\n');
-        }
         let footer = RunFooter {
             wall_duration_s: ep.started.elapsed().as_secs_f64(),
             decisions: ep.decisions,
             parse_failures: ep.bridge.parse_failures(),
             stop: None,
         };
-        out.push_str(&LogLine::End(footer).to_json());
-        out.push('\n');
-        Ok(out)
+        Ok(RunLog { header, samples: ep.samples.clone(), footer })
+    }
+
+    /// [`Sim::run_log`] as JSONL text (the `episode_log.jsonl` file).
+    pub fn episode_log(&self) -> Result<String> {
+        Ok(self.run_log()?.to_jsonl())
     }
 
     /// Seed of the running episode.

@@ -261,9 +261,20 @@ impl PySim {
         to_py(py, &rec)
     }
 
-    /// The run log (JSONL) that `rescore` reads.
-    fn episode_log(&self, py: Python<'_>) -> PyResult<String> {
-        self.inner.episode_log().map_err(|e| err(py, e))
+    /// The run log's lines (header, one per tick, end) as dicts, which `rescore` reads.
+    fn episode_log<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let log = self.inner.run_log().map_err(|e| err(py, e))?;
+        to_py(py, &log.lines().collect::<Vec<_>>())
+    }
+
+    /// Writes the run log to `path` as JSONL (`rescore_file` reads it), atomically: a reader
+    /// sees the old file or the whole new one.
+    fn write_episode_log(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        let text = self.inner.episode_log().map_err(|e| err(py, e))?;
+        let tmp = path.with_extension("jsonl.tmp");
+        std::fs::write(&tmp, text)
+            .and_then(|()| std::fs::rename(&tmp, &path))
+            .map_err(|e| err(py, dh_env::Error::io(&path, e)))
     }
 
     #[getter]
@@ -553,12 +564,24 @@ fn info_to_py<'py>(py: Python<'py>, info: &StepInfo) -> PyResult<Bound<'py, PyAn
     to_py(py, info)
 }
 
-/// Recomputes a scene score from a run log (the JSONL text of `Sim.episode_log`) without
-/// simulating; returns the score record.
+/// Recomputes a scene score from a run log's lines (`Sim.episode_log()`) without simulating;
+/// returns the score record.
 #[pyfunction]
-pub fn rescore<'py>(py: Python<'py>, log: &str) -> PyResult<Bound<'py, PyAny>> {
-    let run = dh_env::score::RunLog::from_jsonl(log, "episode_log").map_err(|e| err(py, e))?;
+pub fn rescore<'py>(py: Python<'py>, log: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+    let lines: Vec<dh_env::score::LogLine> = from_py("episode_log", log).map_err(|e| err(py, e))?;
+    let numbered = lines.into_iter().enumerate().map(|(i, l)| (format!("episode_log[{i}]"), l));
+    let run = dh_env::score::RunLog::from_lines(numbered, "episode_log").map_err(|e| err(py, e))?;
     let rec = run.rescore().map_err(|e| err(py, e))?;
+    to_py(py, &rec)
+}
+
+/// Recomputes a scene score from a run-log file (`episode_log.jsonl`); errors name the file
+/// and line.
+#[pyfunction]
+pub fn rescore_file(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyAny>> {
+    let rec = py
+        .detach(|| dh_env::score::RunLog::read_jsonl(&path).and_then(|run| run.rescore()))
+        .map_err(|e| err(py, e))?;
     to_py(py, &rec)
 }
 
@@ -657,6 +680,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("LIBSUMO_SUMO_SHIM", dh_env::world::sumo::shim::SHIM_FILE)?;
     m.add("TRACI_SUMO_SHIM", dh_env::world::sumo::shim::TRACI_SHIM_FILE)?;
     m.add_function(wrap_pyfunction!(rescore, m)?)?;
+    m.add_function(wrap_pyfunction!(rescore_file, m)?)?;
     m.add_function(wrap_pyfunction!(validate_scenario, m)?)?;
     m.add_function(wrap_pyfunction!(scenario_json_schema, m)?)?;
     m.add_function(wrap_pyfunction!(default_sim_config, m)?)?;

@@ -11,7 +11,6 @@ fed with our episode log (header + ticks): every number of the record must come 
 from __future__ import annotations
 
 import itertools
-import json
 import math
 from typing import Any
 
@@ -67,8 +66,7 @@ def project(p: tuple[float, float], pts: list[tuple[float, float]]) -> tuple[flo
     return best_s, best_d if best_d is not None else math.inf
 
 
-def original_record(log: str, record: dict[str, Any]) -> dict[str, Any]:
-    lines = [json.loads(x) for x in log.splitlines()]
+def original_record(lines: list[dict[str, Any]], record: dict[str, Any]) -> dict[str, Any]:
     head = lines[0]
     ticks = [x for x in lines if x["kind"] == "tick"]
     route = [tuple(p) for p in head["route"]]
@@ -182,7 +180,7 @@ CASES = [
 
 
 @pytest.fixture(scope="module")
-def case_runs() -> list[tuple[dict[str, Any], str]]:
+def case_runs() -> list[tuple[dict[str, Any], list[dict[str, Any]]]]:
     """Each case driven once: (its score record, its episode log)."""
     runs = []
     for scenario, agent in CASES:

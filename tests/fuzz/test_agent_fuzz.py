@@ -113,9 +113,9 @@ def test_non_finite_actions_are_rejected_clearly_and_change_nothing() -> None:
     env.reset(seed=0)
     env.step([0.1, 5.0])
 
-    def trace() -> tuple[list[str], list[dict]]:
+    def trace() -> tuple[list[dict], list[dict]]:
         # The episode log minus its last line (the `end` line carries the wall-clock duration).
-        return env.sim.episode_log().splitlines()[:-1], env.decision_log()
+        return env.sim.episode_log()[:-1], env.decision_log()
 
     before = trace()
     for bad in ([math.nan, 5.0], [0.0, math.inf], [-math.inf, 0.0], np.array([0.0, np.nan], np.float32)):

@@ -156,6 +156,15 @@ pub enum LogLine {
 }
 
 impl LogLine {
+    /// The line's `kind` tag, as written.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            LogLine::Header(_) => "header",
+            LogLine::Tick(_) => "tick",
+            LogLine::End(_) => "end",
+        }
+    }
+
     /// The line as compact JSON, without the trailing newline.
     pub fn to_json(&self) -> String {
         // Serialising these plain structs cannot fail (no maps with non-string keys); NaN
@@ -175,20 +184,29 @@ pub struct RunLog {
 impl RunLog {
     /// Parses JSONL text; `source` names the file in errors (with the 1-based line number).
     pub fn from_jsonl(text: &str, source: &str) -> Result<RunLog> {
-        let mut header = None;
-        let mut samples = Vec::new();
-        let mut footer = None;
+        let mut lines = Vec::new();
         for (i, line) in text.lines().enumerate() {
-            let lineno = i + 1;
             if line.trim().is_empty() {
                 continue;
             }
-            let where_ = format!("line {lineno}");
+            let where_ = format!("line {}", i + 1);
             let parsed: LogLine = serde_json::from_str(line).map_err(|e| {
                 Error::scenario(source, &where_, truncate(line), format!("not a run-log line: {e}"))
             })?;
+            lines.push((where_, parsed));
+        }
+        Self::from_lines(lines, source)
+    }
+
+    /// Assembles parsed lines (each with where it came from, for errors): the header first and
+    /// once, ticks, then the `end` line last.
+    pub fn from_lines(lines: impl IntoIterator<Item = (String, LogLine)>, source: &str) -> Result<RunLog> {
+        let mut header = None;
+        let mut samples = Vec::new();
+        let mut footer = None;
+        for (where_, parsed) in lines {
             if footer.is_some() {
-                return Err(Error::scenario(source, &where_, truncate(line), "line after the `end` line"));
+                return Err(Error::scenario(source, &where_, parsed.kind(), "line after the `end` line"));
             }
             match parsed {
                 LogLine::Header(h) => {
@@ -217,6 +235,13 @@ impl RunLog {
         Ok(RunLog { header, samples, footer })
     }
 
+    /// The log's lines in file order: header, ticks, end.
+    pub fn lines(&self) -> impl Iterator<Item = LogLine> + '_ {
+        std::iter::once(LogLine::Header(Box::new(self.header.clone())))
+            .chain(self.samples.iter().cloned().map(LogLine::Tick))
+            .chain(std::iter::once(LogLine::End(self.footer.clone())))
+    }
+
     pub fn read_jsonl(path: impl AsRef<Path>) -> Result<RunLog> {
         let path = path.as_ref();
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
@@ -224,14 +249,11 @@ impl RunLog {
     }
 
     pub fn to_jsonl(&self) -> String {
-        let mut out = LogLine::Header(Box::new(self.header.clone())).to_json();
-        out.push('\n');
-        for s in &self.samples {
-            out.push_str(&LogLine::Tick(s.clone()).to_json());
+        let mut out = String::with_capacity(128 * (self.samples.len() + 2));
+        for line in self.lines() {
+            out.push_str(&line.to_json());
             out.push('\n');
         }
-        out.push_str(&LogLine::End(self.footer.clone()).to_json());
-        out.push('\n');
         out
     }
 

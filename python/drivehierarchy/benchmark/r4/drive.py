@@ -33,7 +33,7 @@ def finish_scene(
     sim = env.unwrapped.sim
     record = dict(env.unwrapped.score())
     write_json_atomic(scene_dir / "scene_score.json", record)
-    write_text_atomic(scene_dir / "episode_log.jsonl", sim.episode_log())
+    sim.write_episode_log(scene_dir / "episode_log.jsonl")
     write_json_atomic(scene_dir / "events.json", record["events"])
     if not (scene_dir / "decisions.jsonl").exists() and hasattr(sim, "decision_log"):
         lines = "".join(json.dumps(d, sort_keys=True) + "\n" for d in sim.decision_log())

@@ -138,7 +138,7 @@ def rescore_dir(out: Path) -> list[dict[str, Any]]:
             raise ConfigError(f"{out}: no episode_log.jsonl found (expected scenes/*/episode_log.jsonl)")
     rescored = []
     for log_path in scenes:
-        record = _core.rescore(log_path.read_text(encoding="utf-8"))
+        record = _core.rescore_file(log_path)
         write_json_atomic(log_path.parent / "scene_score.rescored.json", record)
         rescored.append({"key": log_path.parent.name, "score": record})
     return rescored
