@@ -135,21 +135,8 @@ pub fn snap_to_lane(
     if !p.is_finite() {
         return Err(err(py, dh_env::Error::config("point", format!("({x}, {y})"), "must be finite")));
     }
-    let mut best: Option<(usize, f64, f64)> = None;
-    for (i, lane) in net.lanes.iter().enumerate() {
-        if class.is_some_and(|c| !lane.allow.contains(c)) {
-            continue;
-        }
-        if !internal && net.edges[lane.edge].function == EdgeFunction::Internal {
-            continue;
-        }
-        if let Some(pr) = lane.shape.project(p) {
-            if pr.distance <= max_dist_m && best.is_none_or(|b| pr.distance < b.2) {
-                best = Some((i, pr.s, pr.distance));
-            }
-        }
-    }
-    Ok(best.map(|(i, s, d)| (net.lanes[i].id.clone(), s, d)))
+    let hit = net.nearest_lane(p, max_dist_m, class, internal);
+    Ok(hit.map(|(i, pr)| (net.lanes[i].id.clone(), pr.s, pr.distance)))
 }
 
 fn trigger_json(t: &Trigger, names: &[String]) -> Value {

@@ -5,13 +5,15 @@
 
 use dh_env::map::VClass;
 use dh_env::scenario::schema::{ActorSpec, AtEndSpec, BehaviorSpec, BrakeSpec, ChainEventSpec, TriggerSpec};
-use dh_env::scenario::traffic::{LaneChoice, SpeedChoice};
-use dh_env::scenario::{vclass_of, TrafficMode, CATEGORIES, SCENARIO_VERSION};
+use dh_env::scenario::traffic::{
+    parse_vtypes, LaneChoice, SpeedChoice, BUILTIN_VTYPES, BUILTIN_VTYPES_NAME, DEFAULT_VTYPE,
+};
+use dh_env::scenario::{vclass_of, TrafficMode, CATEGORIES, EGO_VCLASS, OF_RULES, SCENARIO_VERSION};
 use dh_env::score::TerminationReason;
 use dh_env::view::{ActorKind, SignKind};
 use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyList};
 use schemars::JsonSchema;
 use serde::de::DeserializeOwned;
 use serde_json::Value;
@@ -97,6 +99,26 @@ fn constants(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     d.set_item("sign_kinds", names::<SignKind>())?;
     d.set_item("depart_lanes", names::<LaneChoice>())?;
     d.set_item("depart_speeds", names::<SpeedChoice>())?;
+    d.set_item("ego_vclass", EGO_VCLASS.sumo_name())?;
+    let vtypes = parse_vtypes(BUILTIN_VTYPES_NAME, BUILTIN_VTYPES)
+        .map_err(|e| PyRuntimeError::new_err(format!("the shipped vehicle types do not parse: {e}")))?;
+    // id -> SUMO class, in file order: the editor snaps a traffic row's route to its type's class.
+    let shipped = PyDict::new(py);
+    for t in &vtypes {
+        shipped.set_item(&t.id, t.vclass.sumo_name())?;
+    }
+    d.set_item("builtin_vtypes", shipped)?;
+    d.set_item("default_vtype", DEFAULT_VTYPE)?;
+    let rules = PyList::empty(py);
+    for r in OF_RULES {
+        let rule = PyDict::new(py);
+        rule.set_item("table", r.table)?;
+        rule.set_item("key", r.key)?;
+        rule.set_item("actor_self", r.actor_self)?;
+        rule.set_item("required", r.required)?;
+        rules.append(rule)?;
+    }
+    d.set_item("of_rules", rules)?;
 
     let modes = names::<TrafficMode>();
     for m in &modes {

@@ -47,6 +47,10 @@ EDITOR_KEYS = [
     "actor_keys",
     "start_triggers",
     "brake_triggers",
+    "ego_vclass",
+    "builtin_vtypes",
+    "default_vtype",
+    "of_rules",
 ]
 
 
@@ -220,3 +224,62 @@ def test_old_traffic_names_warn_and_mean_the_new_ones(tmp_path: Path) -> None:
 
         importlib.reload(old)
     assert old.native_sumo_paths is old.libsumo_paths
+
+
+OF_CHECKS = ("goes with", "the only name allowed", "needs `of`")
+
+
+def _of_verdict(tmp_path: Path, table: str, key: str, of: Any) -> bool:
+    """Whether the resolver's `of` rules accept `of` on a `table` trigger keyed `key` (an error
+    elsewhere in the trigger, e.g. a point off the route, is not the rules' verdict)."""
+    import tomlkit
+
+    src = builtin_root() / "r4" / "07_sudden_brake" / "town01_07_lead_brakes.toml"
+    doc = tomlkit.parse(src.read_text(encoding="utf-8"))
+    lead = doc["actors"][0]
+    value: Any = {"after": "actors[1]"}.get(key, 2.0)
+    trig: dict[str, Any] = {key: value}
+    if of is not None:
+        trig["of"] = of
+    if table == "start":
+        lead["start"] = trig
+    else:
+        lead["brake"] = {**trig, "decel_mps2": 7.0}
+    p = tmp_path / f"{table}_{key}.toml"
+    p.write_text(tomlkit.dumps(doc), encoding="utf-8")
+    try:
+        _core.validate_scenario(str(p))
+    except ScenarioError as e:
+        return not (str(e.field).endswith(".of") and any(c in str(e.reason) for c in OF_CHECKS))
+    return True
+
+
+def test_the_of_rules_the_editor_reads_are_the_resolvers(tmp_path: Path) -> None:
+    rules = {(r["table"], r["key"]): r for r in FACTS["of_rules"]}
+    assert {t for t, _ in rules} == {"start", "brake"}
+    for table, keys in (("start", FACTS["start_triggers"]), ("brake", FACTS["brake_triggers"])):
+        for key in keys:
+            rule = rules.get((table, key))
+            point = _of_verdict(tmp_path, table, key, [0.0, 0.0])
+            assert point == (rule is not None), (table, key, "of = [x, y]")
+            assert _of_verdict(tmp_path, table, key, "actor_self") == bool(rule and rule["actor_self"]), (
+                table,
+                key,
+                "of = actor_self",
+            )
+            assert _of_verdict(tmp_path, table, key, None) == (not (rule and rule["required"])), (
+                table,
+                key,
+                "no of",
+            )
+
+
+def test_the_shipped_vehicle_types_and_the_egos_class_are_known_to_the_map_reader() -> None:
+    from drivehierarchy import scenarios
+
+    classes = set(FACTS["vclass_of"].values())
+    assert FACTS["ego_vclass"] in classes
+    assert FACTS["default_vtype"] in FACTS["builtin_vtypes"]
+    shipped = (scenarios.builtin_root() / "traffic" / "vtypes.add.xml").read_text(encoding="utf-8")
+    ids = re.findall(r'<vType\s[^>]*\bid="([^"]+)"', shipped)
+    assert list(FACTS["builtin_vtypes"]) == ids

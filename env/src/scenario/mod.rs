@@ -24,7 +24,7 @@ pub use model::{
     ETA_MAX_OFFSET_M, PALETTE,
 };
 pub use parse::{parse_scenario_file, parse_scenario_str};
-pub use resolve::{default_speed_mps, offset_polyline, SNAP_DISTANCE_M};
+pub use resolve::{default_speed_mps, offset_polyline, OfRule, EGO_VCLASS, OF_RULES, SNAP_DISTANCE_M};
 pub use schema::{ScenarioFile, CATEGORIES, SCENARIO_VERSION};
 pub use tables::{default_size, vclass_of};
 pub use traffic::seeded_rng;

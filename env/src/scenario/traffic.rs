@@ -23,6 +23,8 @@ use std::path::{Path, PathBuf};
 /// names none.
 pub const BUILTIN_VTYPES: &str =
     include_str!("../../../python/drivehierarchy/_data/scenarios/traffic/vtypes.add.xml");
+/// The vehicle type of a traffic vehicle or flow that names none.
+pub const DEFAULT_VTYPE: &str = "car";
 /// How the default vehicle-type file is named in messages and summaries.
 pub const BUILTIN_VTYPES_NAME: &str = "<builtin>/traffic/vtypes.add.xml";
 /// SUMO ids of the vehicles that mirror the ego and the scenario's own actors.
@@ -483,7 +485,7 @@ impl Rx<'_> {
         Ok(out)
     }
     fn vtype(&self, field: &str, name: Option<&str>, types: &[VType]) -> Result<usize> {
-        let name = name.unwrap_or("car");
+        let name = name.unwrap_or(DEFAULT_VTYPE);
         types.iter().position(|t| t.id == name).ok_or_else(|| {
             let known: Vec<&str> = types.iter().map(|t| t.id.as_str()).collect();
             self.err(

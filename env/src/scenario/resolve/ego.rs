@@ -6,6 +6,9 @@ use crate::scenario::model::{ResolvedEgo, EGO_COLOR};
 use crate::scenario::schema::EgoSpec;
 use crate::{Error, Result};
 
+/// The ego's SUMO class: its route and start lanes must allow it.
+pub const EGO_VCLASS: VClass = VClass::Passenger;
+
 pub(super) fn resolve_ego(ctx: &Ctx<'_>, spec: &EgoSpec) -> Result<ResolvedEgo> {
     let map = ctx.map;
     let params = spec.vehicle.unwrap_or_default();
@@ -22,7 +25,7 @@ pub(super) fn resolve_ego(ctx: &Ctx<'_>, spec: &EgoSpec) -> Result<ResolvedEgo> 
         ));
     }
     let chain = match &spec.route_edges {
-        Some(ids) => Some(ctx.edge_chain("ego.route_edges", ids, VClass::Passenger)?),
+        Some(ids) => Some(ctx.edge_chain("ego.route_edges", ids, EGO_VCLASS)?),
         None => None,
     };
     if spec.destination.is_none() && chain.is_none() {
@@ -40,7 +43,7 @@ pub(super) fn resolve_ego(ctx: &Ctx<'_>, spec: &EgoSpec) -> Result<ResolvedEgo> 
             (pose, lane)
         }
         (None, Some(c)) => {
-            let lane = ctx.first_lane("ego.route_edges[0]", c[0], VClass::Passenger)?;
+            let lane = ctx.first_lane("ego.route_edges[0]", c[0], EGO_VCLASS)?;
             let len = map.lanes[lane].shape.length();
             (map.lane_position(lane, (0.25 * len).min(5.0)), lane)
         }
@@ -62,7 +65,7 @@ pub(super) fn resolve_ego(ctx: &Ctx<'_>, spec: &EgoSpec) -> Result<ResolvedEgo> 
         }
         (None, Some(c)) => {
             let last = *c.last().unwrap_or(&start_edge);
-            let lane = ctx.first_lane("ego.route_edges", last, VClass::Passenger)?;
+            let lane = ctx.first_lane("ego.route_edges", last, EGO_VCLASS)?;
             let len = map.lanes[lane].shape.length();
             (map.lane_position(lane, len - (0.25 * len).min(5.0)).pos, last)
         }
@@ -92,7 +95,7 @@ pub(super) fn resolve_ego(ctx: &Ctx<'_>, spec: &EgoSpec) -> Result<ResolvedEgo> 
             })?;
             c[i0..=i1].to_vec()
         }
-        None => map.edge_route(start_edge, dest_edge, VClass::Passenger).ok_or_else(|| {
+        None => map.edge_route(start_edge, dest_edge, EGO_VCLASS).ok_or_else(|| {
             ctx.err(
                 "ego.destination",
                 &map.edges[dest_edge].id,

@@ -10,7 +10,9 @@ mod lights;
 mod trigger;
 
 pub use actor::default_speed_mps;
+pub use ego::EGO_VCLASS;
 pub use lane_change::LANE_CHANGE_LENGTH_M;
+pub use trigger::{OfRule, OF_RULES};
 
 use crate::geom::{Polyline, Pose, Vec2};
 use crate::map::{EdgeFunction, EdgeIdx, LaneIdx, Network, VClass};

@@ -9,6 +9,24 @@ use crate::scenario::schema::{BrakeSpec, ChainEventSpec, OfSpec, TriggerSpec};
 use crate::{Error, Result};
 use std::path::Path;
 
+/// Where a trigger's `of` point is read: the table (`start` or `brake`), the key it goes with,
+/// whether `"actor_self"` is accepted there, and whether `of` is required. The resolver below
+/// applies these rules; the editor reads this table (`_core.constants()["of_rules"]`), and a test
+/// checks the two agree.
+pub struct OfRule {
+    pub table: &'static str,
+    pub key: &'static str,
+    pub actor_self: bool,
+    pub required: bool,
+}
+
+pub const OF_RULES: &[OfRule] = &[
+    OfRule { table: "start", key: "ego_within_m", actor_self: true, required: false },
+    OfRule { table: "start", key: "ego_eta_s", actor_self: true, required: false },
+    OfRule { table: "brake", key: "ego_within_m", actor_self: true, required: false },
+    OfRule { table: "brake", key: "ego_eta_s", actor_self: false, required: true },
+];
+
 pub(super) fn resolve_of(ctx: &Ctx<'_>, field: &str, of: Option<&OfSpec>, self_pos: Vec2) -> Result<Vec2> {
     Ok(match of {
         None => self_pos,

@@ -16,6 +16,9 @@ window.editor = { S };
 // and the scenario JSON Schema, fetched from /api/facts at load: the page keeps no copy of them.
 let FACTS = null;
 const K = () => FACTS.constants;
+const EGO_VCLASS = () => K().ego_vclass;
+// The SUMO class a traffic row's route must allow: its (shipped) vehicle type's; the ego's otherwise.
+const vtypeClass = (vtype) => K().builtin_vtypes[vtype || K().default_vtype] ?? EGO_VCLASS();
 
 // -- server ----------------------------------------------------------------------------------
 function busy(delta) {
@@ -560,7 +563,7 @@ window.addEventListener("mouseup", guard(async (ev) => {
   if (d.handle) {
     const [px, py] = eventPos(ev);
     const [x, y] = toWorld(px, py);
-    const hit = await snap(x, y, "passenger", false);
+    const hit = await snap(x, y, EGO_VCLASS(), false);
     const i = d.handle.actor;
     const of = hit.lane ? { lane: hit.lane, s: hit.s } : [round(x), round(y)];
     await edit([{ path: ["actors", i, "start", "of"], value: of, floats: true }]);
@@ -615,7 +618,7 @@ canvas.addEventListener("click", guard(async (ev) => {
     setMode("select");
     await p.apply(hit, x, y);
   } else if (S.mode === "ego-start" || S.mode === "ego-dest") {
-    const hit = await snap(x, y, "passenger", false);
+    const hit = await snap(x, y, EGO_VCLASS(), false);
     if (!hit.lane) return status("no drivable lane there", "bad");
     const key = S.mode === "ego-start" ? "start" : "destination";
     await edit([{ path: ["ego", key], value: { lane: hit.lane, s: hit.s }, floats: true }]);
@@ -793,7 +796,7 @@ function laneEdge(lane) {
 // Map picking: the next click on the map snaps to a lane (open to `vclass`) and calls `apply`.
 function pick(help, vclass, apply) {
   setMode("pick");
-  S.pick = { vclass: vclass === undefined ? "passenger" : vclass, apply };
+  S.pick = { vclass: vclass === undefined ? EGO_VCLASS() : vclass, apply };
   $("mode-help").textContent = help + " (Esc cancels)";
   status(help);
   canvas.scrollIntoView({ block: "nearest" });
@@ -890,7 +893,7 @@ function placeField(label, path, opts) {
     else if (k === "pair") nv = [x, y];
     else if (k === "xy") nv = { x, y };
     else {
-      const hit = await snap(x, y, opts.vclass === undefined ? "passenger" : opts.vclass, false).catch(() => null);
+      const hit = await snap(x, y, opts.vclass === undefined ? EGO_VCLASS() : opts.vclass, false).catch(() => null);
       nv = hit && hit.lane ? { lane: hit.lane, s: hit.s } : { lane: "", s: 0.0 };
     }
     await safeEdit([{ path, value: nv, floats: true }]);
@@ -992,8 +995,9 @@ function triggerFields(i, prefix, t, choices) {
   }
   if (isBrake) for (const key of BRAKE_KEYS) cells.append(cell(key, [...prefix, key], "number"));
   box.append(cells);
-  if (["ego_within_m", "ego_eta_s"].includes(kind)) {
-    box.append(placeField("of", [...prefix, "of"], { pair: true, self: kind === "ego_within_m" || !isBrake, point: () => triggerPoint(i) }));
+  const ofRule = K().of_rules.find((r) => r.table === (isBrake ? "brake" : "start") && r.key === kind);
+  if (ofRule) {
+    box.append(placeField("of", [...prefix, "of"], { pair: true, self: ofRule.actor_self, point: () => triggerPoint(i) }));
   }
   const known = [...TRIGGERS(), ...BRAKES().filter(Boolean), "of", "delay_s", "event", ...BRAKE_KEYS];
   if (isObj(t)) box.append(...extras(t, known, prefix));
@@ -1086,7 +1090,7 @@ function renderForm() {
   };
   ego.append(placeField("start", ["ego", "start"], { point: egoPoint("start") }),
     placeField("destination", ["ego", "destination"], { point: egoPoint("destination") }),
-    idList("route_edges", ["ego", "route_edges"], "edge", "passenger"), field("speed_mps", ["ego", "speed_mps"], "number"));
+    idList("route_edges", ["ego", "route_edges"], "edge", EGO_VCLASS()), field("speed_mps", ["ego", "speed_mps"], "number"));
   ego.append(h("div", { class: "cells" }, colorField("color", ["ego", "color"])));
   ego.append(...extras(S.doc.ego, ["start", "destination", "route_edges", "speed_mps", "color"], ["ego"]));
   form.append(gen, ego);
@@ -1200,7 +1204,6 @@ function lightForm(prog, idx) {
   return box;
 }
 
-const VTYPES = ["car", "van", "truck", "bus", "motorcycle", "bicycle"];
 const DEPART = ["depart_lane", "depart_pos_m", "depart_speed", "max_speed_mps", "speed_factor"];
 
 function departCells(p) {
@@ -1214,14 +1217,14 @@ function departCells(p) {
 function trafficForm() {
   const tr = h("fieldset", { id: "traffic" }, h("legend", {}, "[traffic]"));
   const t = S.doc.traffic;
-  tr.append(h("datalist", { id: "vtypes" }, ...VTYPES.map((v) => h("option", { value: v }))),
+  tr.append(h("datalist", { id: "vtypes" }, ...Object.keys(K().builtin_vtypes).map((v) => h("option", { value: v }))),
     h("datalist", { id: "depart-lanes" }, ...K().depart_lanes.map((v) => h("option", { value: v }))),
     h("datalist", { id: "depart-speeds" }, ...K().depart_speeds.map((v) => h("option", { value: v }))));
   tr.append(field("mode", ["traffic", "mode"], ["", ...K().traffic_modes]), field("warmup_s", ["traffic", "warmup_s"], "number"),
     field("vtypes", ["traffic", "vtypes"], "text", { placeholder: "shipped vtypes.add.xml" }));
   const pv = ["traffic", "vehicles"];
   tr.append(rows("vehicles", pv, (p) => [cell("id", [...p, "id"], "text"), cell("vtype", [...p, "vtype"], "text", { list: "vtypes" }),
-    cell("depart_s", [...p, "depart_s"], "number"), ...departCells(p), idList("route", [...p, "route"], "edge", "passenger"),
+    cell("depart_s", [...p, "depart_s"], "number"), ...departCells(p), idList("route", [...p, "route"], "edge", vtypeClass(get(S.doc, [...p, "vtype"]))),
     ...extras(get(S.doc, p), ["id", "vtype", "route", "depart_s", ...DEPART], p, true)],
   () => ({ id: `veh${((t && t.vehicles) || []).length}`, route: [] }), { addLabel: "+ vehicle" }));
   const pf = ["traffic", "flows"];
@@ -1239,7 +1242,7 @@ function trafficForm() {
     return [cell("id", [...p, "id"], "text"), cell("vtype", [...p, "vtype"], "text", { list: "vtypes" }),
       cell("from", [...p, "from"], "edge"), cell("to", [...p, "to"], "edge"), rateCell,
       cell("begin_s", [...p, "begin_s"], "number"), cell("end_s", [...p, "end_s"], "number"), cell("number", [...p, "number"], "int"),
-      ...departCells(p), idList("via", [...p, "via"], "edge", "passenger"),
+      ...departCells(p), idList("via", [...p, "via"], "edge", vtypeClass(f && f.vtype)),
       ...extras(f, ["id", "vtype", "from", "to", "via", "vehs_per_hour", "probability", "begin_s", "end_s", "number", ...DEPART], p, true)];
   }, () => ({ id: `flow${((t && t.flows) || []).length}`, from: "", to: "", vehs_per_hour: 300 }), { addLabel: "+ flow" }));
   const pr = ["traffic", "random"];
