@@ -117,6 +117,10 @@ def _descriptor(key: str, w: int, h: int, when: str) -> str:
     return f"{head} at {when} ({rest}"
 
 
+def _m(v: float) -> str:
+    return f"{round(v, 1) + 0.0:.1f}"  # + 0.0: no "-0.0"
+
+
 def _value(v: Any) -> str:
     return json.dumps(v) if not isinstance(v, str) else v
 
@@ -222,7 +226,7 @@ class DecisionHistory:
             dx, dy = p.ego[0] - x0, p.ego[1] - y0
             fwd, right = dx * c + dy * s, dx * s - dy * c  # left is (−sin, cos)
             items.append(
-                f"{offset_label(tick - p.tick, self.tick_s)}: ({fwd:.1f}, {right:.1f}) at {p.ego[3]:.1f} m/s"
+                f"{offset_label(tick - p.tick, self.tick_s)}: ({_m(fwd)}, {_m(right)}) at {p.ego[3]:.1f} m/s"
             )
         return f"{head}: " + "; ".join(items) + "."
 
