@@ -1,4 +1,4 @@
-"""History and memory in the decision message (docs/vlm.md#history): the exact content array of
+"""History and memory in the decision message (docs/vlm.md#history-and-memory): the exact content array of
 every mode, the episode-start rule, the controls, the ego and memory texts, no re-encoding, and
 what the manifest and the run's identity record."""
 

@@ -53,7 +53,7 @@ class VLMOptions:
     # `server_unavailable` (redone on resume) instead of being driven on held controls.
     max_consecutive_transport_failures: int = 3
     latency_aware: bool = False
-    # Past frames, ego states and decisions (this project's extension, docs/vlm.md#history).
+    # Past frames, ego states and decisions (this project's extension, docs/vlm.md#history-and-memory).
     history: HistoryOptions = field(default_factory=HistoryOptions)
 
     def __post_init__(self) -> None:
@@ -107,7 +107,7 @@ class VLMOptions:
         }
 
     def inputs(self) -> dict[str, Any]:
-        """What the model is given, as `r4 report` compares runs (docs/vlm.md#history)."""
+        """What the model is given, as `r4 report` compares runs (docs/vlm.md#history-and-memory)."""
         h, p = self.history, self.effective_payload()
         controls = [
             name

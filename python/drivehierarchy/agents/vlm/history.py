@@ -1,4 +1,5 @@
-"""History and memory for the VLM driver: this project's extension of the protocol (docs/vlm.md#history).
+"""History and memory for the VLM driver, this project's extension of the protocol
+(docs/vlm.md#history-and-memory).
 
 The paper's message carries the current frames only. With `HistoryOptions` the one user turn also
 carries, oldest first, the front frames (and BEVs) of earlier decisions `stride` decisions apart,
@@ -99,12 +100,14 @@ class HistoryOptions:
         return asdict(self)
 
 
-@dataclass
+@dataclass(slots=True)
 class _Past:
     decision: int
     tick: int
     images: list[tuple[str, int, int, str]]  # (key, width, height, data URL) as sent
-    ego: tuple[float, float, float, float] | None  # x, y, yaw, speed
+    x: float = 0.0
+    y: float = 0.0
+    speed: str = ""  # "8.1 m/s", formatted once
 
 
 def offset_label(ticks: int, tick_s: float) -> str:
@@ -117,12 +120,20 @@ def _descriptor(key: str, w: int, h: int, when: str) -> str:
     return f"{head} at {when} ({rest}"
 
 
-def _m(v: float) -> str:
-    return f"{round(v, 1) + 0.0:.1f}"  # + 0.0: no "-0.0"
-
-
 def _value(v: Any) -> str:
-    return json.dumps(v) if not isinstance(v, str) else v
+    return v if isinstance(v, str) else repr(v) if isinstance(v, float) else json.dumps(v)
+
+
+def _reply_text(reply: dict[str, Any]) -> str:
+    """What became of a decision, as its memory line says (formatted once, when it is recorded)."""
+    parsed, failure = reply.get("parsed"), reply.get("failure")
+    if parsed is not None and failure is None:
+        return ", ".join(
+            [f"{k}: {v!r}" if type(v) is float else f"{k}: {_value(v)}" for k, v in parsed.items()]
+        )
+    if failure == "no_reply" or not reply:
+        return "no reply, the previous control was held"
+    return "unparseable reply, the previous control was held"
 
 
 @dataclass
@@ -134,7 +145,7 @@ class DecisionHistory:
     tick_s: float
     seed: int = 0
     _frames: deque[_Past] = field(init=False)
-    _replies: deque[tuple[int, int, dict[str, Any]]] = field(init=False)
+    _replies: deque[tuple[int, int, str]] = field(init=False)  # (decision, asked tick, what happened)
     _asked: dict[int, int] = field(init=False, default_factory=dict)
     # The time offsets (s) of the past frames the last message carried, oldest first (for the log).
     last_offsets_s: list[float] = field(init=False, default_factory=list)
@@ -149,20 +160,44 @@ class DecisionHistory:
         self._frames = deque(maxlen=max(o.frames, o.ego) * o.stride or 1)
         self._replies = deque(maxlen=o.memory or 1)
         self._asked = {}
+        self._labels: dict[int, str] = {}
+        self._descriptors: dict[tuple[str, int, int, str], str] = {}
 
-    def _slots(self, decision: int, count: int) -> list[_Past]:
-        """The past entries of decisions n − stride·k, k = count..1 (oldest first), those that exist."""
-        by_decision = {p.decision: p for p in self._frames}
-        s = self.options.stride
-        return [by_decision[d] for k in range(count, 0, -1) if (d := decision - k * s) in by_decision]
+    def _slots(self, count: int) -> list[_Past]:
+        """The past entries of decisions n − stride·k, k = count..1 (oldest first), those that exist.
+        The buffer holds consecutive decisions up to n − 1, so n − j is at index len − j."""
+        frames, s = self._frames, self.options.stride
+        return [frames[-k * s] for k in range(min(count, len(frames) // s), 0, -1)]
+
+    def _descriptor(self, key: str, w: int, h: int, when: str) -> str:
+        k = (key, w, h, when)
+        text = self._descriptors.get(k)
+        if text is None:
+            text = self._descriptors[k] = _descriptor(key, w, h, when)
+        return text
+
+    def _label(self, ticks: int) -> str:
+        label = self._labels.get(ticks)
+        if label is None:
+            label = self._labels[ticks] = offset_label(ticks, self.tick_s)
+        return label
 
     def messages(
         self, obs: dict[str, Any], decision: int, tick: int, ego: Sequence[float] | None = None
     ) -> list[dict[str, Any]]:
         """The message of decision `decision` (1-based) asked at `tick`; records the current frames."""
         o = self.options
+        if self._frames and self._frames[-1].decision != decision - 1:
+            raise ValueError(
+                f"decision {decision} after decision {self._frames[-1].decision}: one message per decision, "
+                "in order (reset() starts an episode)"
+            )
+        if "prompt" not in obs:
+            raise ConfigError("config `prompt` = False: the VLM agent needs the env's prompt observation")
+        if o.ego and ego is None:
+            raise ConfigError(f"--ego-history = {o.ego}: the ego state of decision {decision} is missing")
         current = encode_images(obs, decision, self.payload, seed=self.seed)
-        frame_slots = self._slots(decision, o.frames)
+        frame_slots = self._slots(o.frames)
         self.last_offsets_s = [round((tick - p.tick) * self.tick_s, 4) for p in frame_slots]
         content: Content = []
         sources = list(frame_slots)
@@ -170,30 +205,28 @@ class DecisionHistory:
             sources = [sources[i] for i in self._permutation(decision, len(sources))]
         keys = ("front", "bev") if o.bev else ("front",)
         for slot, src in zip(frame_slots, sources, strict=True):
-            when = offset_label(tick - slot.tick, self.tick_s)
+            when = self._label(tick - slot.tick)
             images = current if o.freeze else src.images
             for key, w, h, url in images:
                 if key in keys:
-                    content.append({"type": "text", "text": _descriptor(key, w, h, when)})
+                    content.append({"type": "text", "text": self._descriptor(key, w, h, when)})
                     content.append({"type": "image_url", "image_url": {"url": url}})
         for key, w, h, url in current:
             if o.frames:
-                text = _descriptor(key, w, h, CURRENT_LABEL)
+                text = self._descriptor(key, w, h, CURRENT_LABEL)
             else:  # no past frames: the paper's descriptors
                 text = front_descriptor(w, h) if key == "front" else bev_descriptor(w)
             content.append({"type": "text", "text": text})
             content.append({"type": "image_url", "image_url": {"url": url}})
         if o.ego:
-            content.append({"type": "text", "text": self._ego_text(self._slots(decision, o.ego), tick, ego)})
+            content.append({"type": "text", "text": self._ego_text(self._slots(o.ego), tick, ego)})
         if o.memory:
             content.append({"type": "text", "text": self._memory_text(tick)})
-        if "prompt" not in obs:
-            raise ConfigError("config `prompt` = False: the VLM agent needs the env's prompt observation")
         content.append({"type": "text", "text": question_text(obs["prompt"], decision)})
-        ego_t = (float(ego[0]), float(ego[1]), float(ego[2]), float(ego[3])) if ego is not None else None
-        if o.ego and ego_t is None:
-            raise ConfigError(f"--ego-history = {o.ego}: the ego state of decision {decision} is missing")
-        self._frames.append(_Past(decision, tick, current if o.frames else [], ego_t))
+        past = _Past(decision, tick, current)
+        if ego is not None and o.ego:
+            past.x, past.y, past.speed = float(ego[0]), float(ego[1]), f"{ego[3]:.1f} m/s"
+        self._frames.append(past)
         self._asked[decision] = tick
         return [{"role": "user", "content": content}]
 
@@ -204,7 +237,7 @@ class DecisionHistory:
         tick = self._asked.pop(decision, None)
         if tick is None:
             return
-        self._replies.append((decision, tick, dict(reply or {})))
+        self._replies.append((decision, tick, _reply_text(reply or {})))
 
     def _permutation(self, decision: int, n: int) -> list[int]:
         """A permutation of the n past slots that is never the identity, from seed and decision."""
@@ -220,28 +253,20 @@ class DecisionHistory:
             return f"{head}: none yet (the episode has just started)."
         x0, y0, yaw0 = float(ego[0]), float(ego[1]), float(ego[2])
         c, s = math.cos(yaw0), math.sin(yaw0)
-        items = []
-        for p in slots:
-            assert p.ego is not None
-            dx, dy = p.ego[0] - x0, p.ego[1] - y0
-            fwd, right = dx * c + dy * s, dx * s - dy * c  # left is (−sin, cos)
-            items.append(
-                f"{offset_label(tick - p.tick, self.tick_s)}: ({_m(fwd)}, {_m(right)}) at {p.ego[3]:.1f} m/s"
-            )
-        return f"{head}: " + "; ".join(items) + "."
+        label = self._label
+        # forward is (cos, sin), left (−sin, cos), so right = dx·sin − dy·cos
+        items = [
+            f"{label(tick - p.tick)}: ({(p.x - x0) * c + (p.y - y0) * s:.1f}, "
+            f"{(p.x - x0) * s - (p.y - y0) * c:.1f}) at {p.speed}"
+            for p in slots
+        ]
+        text = f"{head}: " + "; ".join(items) + "."
+        return text.replace("(-0.0,", "(0.0,").replace(" -0.0)", " 0.0)")
 
     def _memory_text(self, tick: int) -> str:
         head = "Your previous decisions, oldest first"
         if not self._replies:
             return f"{head}: none yet (this is the first decision)."
-        items = []
-        for decision, asked, rep in self._replies:
-            parsed, failure = rep.get("parsed"), rep.get("failure")
-            if parsed is not None and failure is None:
-                what = ", ".join(f"{k}: {_value(v)}" for k, v in parsed.items())
-            elif failure == "no_reply" or not rep:
-                what = "no reply, the previous control was held"
-            else:
-                what = "unparseable reply, the previous control was held"
-            items.append(f"{offset_label(tick - asked, self.tick_s)} (frame {decision}): {what}")
+        label = self._label
+        items = [f"{label(tick - asked)} (frame {d}): {what}" for d, asked, what in self._replies]
         return f"{head}: " + "; ".join(items) + "."

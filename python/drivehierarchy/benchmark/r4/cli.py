@@ -57,7 +57,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
             help="control: the world keeps moving for each reply's latency (previous control held)",
         )
         h = p.add_argument_group(
-            "VLM history and memory (this project's extension of the protocol; docs/vlm.md#history)"
+            "VLM history and memory (this project's extension of the protocol, docs/vlm.md)"
         )
         h.add_argument("--history", type=int, default=0, metavar="N", help="send the last N front frames too")
         h.add_argument(
