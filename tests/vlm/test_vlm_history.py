@@ -280,3 +280,36 @@ def test_manifest_records_history_and_identity_only_when_used() -> None:
         "controls": ["history-shuffle"],
     }  # fmt: skip
     assert runner.RunOptions().run_facts()["action_level"] == "control"
+
+
+def test_the_blocking_agent_sends_the_same_history() -> None:
+    """`VLMAgent` (scripts, `run_episode`) builds history like the harness: past frames, ego
+    states from the env, memory from the env's parse of its earlier replies."""
+    from drivehierarchy.agents.base import run_episode
+    from drivehierarchy.agents.vlm import VLMAgent
+    from drivehierarchy.envs.r4 import DriveHierarchyR4Env
+    from drivehierarchy.testing.openai_server import ScriptedOpenAIServer, route_driver
+
+    server = ScriptedOpenAIServer(route_driver)
+    server.keep_log = True
+    h = HistoryOptions(frames=2, ego=1, memory=1)
+    with server as url:
+        agent = VLMAgent(VLMOptions(base_url=url, model="test-model", history=h))
+        env = DriveHierarchyR4Env(scenario="01_pedestrian/town01_01_midblock_crossing")
+        try:
+            run_episode(env, agent, seed=0, max_steps=4)
+        finally:
+            agent.close()
+            env.close()
+    reqs = server.requests_log
+    assert [len(r.images) for r in reqs] == [2, 3, 4, 4]
+    assert reqs[3].user_texts[0].startswith("Front camera image at t-0.50 s (")
+    assert reqs[0].user_texts[-3].endswith("none yet (the episode has just started).")
+    assert reqs[3].user_texts[-3].startswith("Ego history, oldest first") and " at " in reqs[3].user_texts[-3]
+    assert (
+        reqs[3]
+        .user_texts[-2]
+        .startswith("Your previous decisions, oldest first: t-0.25 s (frame 3): steer: ")
+    )
+    # The past front frame is the one sent as current two decisions before, byte for byte.
+    assert reqs[3].images[0].sha256 == reqs[1].images[-2].sha256
