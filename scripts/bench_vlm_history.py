@@ -18,7 +18,7 @@ inflates all of them alike rather than one.
    SDK, the server's reply and the run's files: decisions/s without images, with and without
    history, then with images.
 
-    python scripts/bench_vlm_history.py [--decisions 200] [--rounds 3] [--history 4] [--k 4]
+    python scripts/bench_vlm_history.py [--decisions 200] [--rounds 3] [--seeds 4] [--history 4] [--k 4]
 """
 
 from __future__ import annotations
@@ -105,9 +105,10 @@ def best_of(settings: list[Setting], decisions: int, rounds: int) -> dict[str, t
     return best
 
 
-def harness(url: str, setting: Setting, out: Path) -> tuple[float, float, int]:
+def harness(url: str, setting: Setting, out: Path, seeds: int) -> tuple[float, float, int]:
     """(wall seconds, this process's CPU seconds, decisions) of `r4 evaluate --agent vlm` on the
-    scenario."""
+    scenario with `seeds` seeds (several, so the run's fixed costs — the SDK client, the
+    manifest's git call, loading the scenario — weigh little per decision)."""
     from drivehierarchy.agents.vlm import PayloadOptions, VLMOptions
     from drivehierarchy.benchmark.r4 import runner
     from drivehierarchy.scenarios import resolve_scenario
@@ -118,13 +119,17 @@ def harness(url: str, setting: Setting, out: Path) -> tuple[float, float, int]:
         payload=PayloadOptions(blind=not setting.images),
         history=setting.history,
     )
-    opts = runner.RunOptions(agent="vlm", vlm=vlm)
+    opts = runner.RunOptions(agent="vlm", vlm=vlm, seeds=seeds)
     t0, c0 = time.perf_counter(), time.process_time()
-    (result,) = runner.evaluate([Path(resolve_scenario(SCENARIO))], out, opts, log=lambda _: None)
-    return time.perf_counter() - t0, time.process_time() - c0, int(result["vlm"]["decisions"])
+    results = runner.evaluate([Path(resolve_scenario(SCENARIO))], out, opts, log=lambda _: None)
+    return (
+        time.perf_counter() - t0,
+        time.process_time() - c0,
+        sum(int(r["vlm"]["decisions"]) for r in results),
+    )
 
 
-def end_to_end(settings: list[Setting], rounds: int) -> dict[str, tuple[float, float]]:
+def end_to_end(settings: list[Setting], rounds: int, seeds: int) -> dict[str, tuple[float, float]]:
     """Per setting: (median wall decisions/s, median harness-CPU seconds per decision) over the
     rounds. The harness's CPU time (all its threads; the server is another process) is what
     history adds to; the wall rate also holds the server and whatever else the machine runs. The
@@ -141,10 +146,10 @@ def end_to_end(settings: list[Setting], rounds: int) -> dict[str, tuple[float, f
         server.stderr.readline()  # "serving ..." once it listens
         url = f"http://127.0.0.1:{port}/v1"
         with tempfile.TemporaryDirectory() as tmp:
-            harness(url, settings[0], Path(tmp) / "warm-up")  # imports, first connection
+            harness(url, settings[0], Path(tmp) / "warm-up", 1)  # imports, first connection
             for r in range(rounds):
                 for i, s in enumerate(settings):
-                    wall, cpu, n = harness(url, s, Path(tmp) / f"{r}_{i}")
+                    wall, cpu, n = harness(url, s, Path(tmp) / f"{r}_{i}", seeds)
                     samples[s.name].append((n / wall, cpu / n))
     finally:
         server.terminate()
@@ -169,10 +174,11 @@ def main() -> int:
     ap.add_argument("--rounds", type=int, default=3, help="alternating rounds; the best is kept")
     ap.add_argument("--history", type=int, default=4, help="past frames (N)")
     ap.add_argument("--k", type=int, default=4, help="ego-history and memory length (K)")
-    ap.add_argument("--quick", action="store_true", help="smoke run (CI): 10 decisions, 1 round")
+    ap.add_argument("--seeds", type=int, default=4, help="seeds per end-to-end run (default 4)")
+    ap.add_argument("--quick", action="store_true", help="smoke run (CI): 10 decisions, 1 round, 1 seed")
     args = ap.parse_args()
     if args.quick:
-        args.decisions, args.rounds = 10, 1
+        args.decisions, args.rounds, args.seeds = 10, 1, 1
 
     k, n = args.k, args.history
     text = HistoryOptions(ego=k, memory=k)
@@ -205,8 +211,11 @@ def main() -> int:
         "no frame is encoded twice)"
     )
 
-    print(f"\nend to end (r4 evaluate, loopback scripted server, one scenario, median of {args.rounds}):")
-    rates = end_to_end(settings, args.rounds)
+    print(
+        f"\nend to end (r4 evaluate, loopback scripted server, one scenario × {args.seeds} seeds, "
+        f"median of {args.rounds}):"
+    )
+    rates = end_to_end(settings, args.rounds, args.seeds)
     print(f"{'setting':<{width}}  {'decisions/s':>11}  {'harness CPU ms/decision':>23}")
     for s in settings:
         rate, per = rates[s.name]
