@@ -73,7 +73,12 @@ def drive(setting: Setting, decisions: int) -> tuple[float, int, int]:
         else:
             ego = env.sim.ego_array().tolist() if setting.history.ego else None
             messages = history.messages(obs, episode_n, int(info["tick"]), ego)
-        body = json.dumps({"model": "m", "messages": messages, "temperature": 0.0, "max_tokens": 256})
+        # Serialised as the SDK serialises a request body.
+        body = json.dumps(
+            {"model": "m", "messages": messages, "temperature": 0.0, "max_tokens": 256},
+            ensure_ascii=False,
+            separators=(",", ":"),
+        )
         t1 = time.perf_counter()
         question = messages[0]["content"][-1]
         reply = route_driver(parse_chat_request({"messages": [{"role": "user", "content": [question]}]}))
