@@ -24,7 +24,6 @@ inflates all of them alike rather than one.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import socket
 import statistics
@@ -51,6 +50,7 @@ def drive(setting: Setting, decisions: int) -> tuple[float, int, int]:
     from drivehierarchy import _core
     from drivehierarchy.agents.vlm.history import DecisionHistory
     from drivehierarchy.agents.vlm.payload import PayloadOptions, build_messages
+    from drivehierarchy.agents.vlm.transport import encode_body
     from drivehierarchy.envs.config import R4Config
     from drivehierarchy.envs.r4 import DriveHierarchyR4Env
     from drivehierarchy.testing.openai_server import parse_chat_request, route_driver
@@ -73,12 +73,8 @@ def drive(setting: Setting, decisions: int) -> tuple[float, int, int]:
         else:
             ego = env.sim.ego_array().tolist() if setting.history.ego else None
             messages = history.messages(obs, episode_n, int(info["tick"]), ego)
-        # Serialised as the SDK serialises a request body.
-        body = json.dumps(
-            {"model": "m", "messages": messages, "temperature": 0.0, "max_tokens": 256},
-            ensure_ascii=False,
-            separators=(",", ":"),
-        )
+        # The bytes the transport sends (`transport.encode_body`).
+        body = encode_body({"model": "m", "messages": messages, "temperature": 0.0, "max_tokens": 256})
         t1 = time.perf_counter()
         question = messages[0]["content"][-1]
         reply = route_driver(parse_chat_request({"messages": [{"role": "user", "content": [question]}]}))

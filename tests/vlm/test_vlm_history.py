@@ -313,3 +313,21 @@ def test_the_blocking_agent_sends_the_same_history() -> None:
     )
     # The past front frame is the one sent as current two decisions before, byte for byte.
     assert reqs[3].images[0].sha256 == reqs[1].images[-2].sha256
+
+
+def test_request_bodies_are_the_json_the_sdk_would_send() -> None:
+    """`encode_body` writes data URLs in unscanned; the bytes are exactly json.dumps' (compact,
+    UTF-8), with history, with text that needs escaping, and with the marker in a prompt."""
+    import json
+
+    from drivehierarchy.agents.vlm.transport import _URL_MARK, encode_body
+
+    h = DecisionHistory(HistoryOptions(frames=3, bev=True, memory=1), PayloadOptions(), TICK_S)
+    for n in range(1, 5):
+        obs = {**_obs(n), "prompt": f'prompt "{n}" \\ ünïcode\n\t{_URL_MARK if n == 4 else ""}'}
+        messages = h.messages(obs, n, 4 + 5 * n, None)
+        body = {"model": "m", "messages": messages, "temperature": 0.0, "max_tokens": 256}
+        sent = encode_body(body)
+        assert sent == json.dumps(body, ensure_ascii=False, separators=(",", ":")).encode("utf-8")
+        assert json.loads(sent) == body
+        assert type(messages[0]["content"][1]["image_url"]["url"]) is payload_mod.DataURL

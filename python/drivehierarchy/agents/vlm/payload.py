@@ -101,8 +101,16 @@ def jpeg_bytes(img: np.ndarray, quality: int = JPEG_QUALITY) -> bytes:
     return bytes(simplejpeg.encode_jpeg(img, quality=quality, colorspace="RGB", colorsubsampling="420"))
 
 
-def jpeg_data_url(img: np.ndarray, quality: int = JPEG_QUALITY) -> str:
-    return "data:image/jpeg;base64," + base64.b64encode(jpeg_bytes(img, quality)).decode("ascii")
+class DataURL(str):
+    """A base64 data URL: none of its characters needs escaping in JSON, so the transport writes
+    it into a request body as it is (`transport.encode_body`), without scanning it again each time
+    it is sent (a past frame is sent with every decision that carries it)."""
+
+    __slots__ = ()
+
+
+def jpeg_data_url(img: np.ndarray, quality: int = JPEG_QUALITY) -> DataURL:
+    return DataURL("data:image/jpeg;base64," + base64.b64encode(jpeg_bytes(img, quality)).decode("ascii"))
 
 
 def question_text(prompt: str, decision: int) -> str:
@@ -113,7 +121,7 @@ def encode_images(
     obs: dict[str, Any], decision: int, options: PayloadOptions, *, seed: int = 0
 ) -> list[tuple[str, int, int, str]]:
     """The message's images of `obs`, in order, as (key, width, height, data URL)."""
-    images = []
+    images: list[tuple[str, int, int, str]] = []
     for key in options.images:
         if key not in obs:
             raise ConfigError(
@@ -125,7 +133,7 @@ def encode_images(
             # Seeded by episode seed and decision, so a corrupted run is reproducible.
             img = corrupt_image(img, options.corrupt, seed * 1_000_003 + decision * 2 + (key == "bev"))
         h, w = img.shape[:2]
-        images.append((key, w, h, jpeg_data_url(img, options.jpeg_quality)))
+        images.append((key, int(w), int(h), jpeg_data_url(img, options.jpeg_quality)))
     return images
 
 
