@@ -331,3 +331,21 @@ def test_request_bodies_are_the_json_the_sdk_would_send() -> None:
         assert sent == json.dumps(body, ensure_ascii=False, separators=(",", ":")).encode("utf-8")
         assert json.loads(sent) == body
         assert type(messages[0]["content"][1]["image_url"]["url"]) is payload_mod.DataURL
+
+
+def test_cli_history_flags_are_checked(tmp_path, capsys: pytest.CaptureFixture) -> None:
+    from drivehierarchy.cli import main
+
+    scenario = "01_pedestrian/town01_01_midblock_crossing"
+    base = ["r4", "run", "--scenario", scenario, "--out", str(tmp_path / "o")]
+    assert main([*base, "--history", "2"]) == 2
+    assert "--history: only for --agent vlm" in capsys.readouterr().err
+    vlm = [*base, "--agent", "vlm", "--base-url", "http://127.0.0.1:9/v1", "--model", "m"]
+    for flags, message in (
+        (["--history", "1", "--history-shuffle"], "--history-shuffle with --history = 1"),
+        (["--history", "2", "--blind"], "--history = 2 with --blind"),
+        (["--stride", "3"], "--stride = 3: only with --history or --ego-history"),
+    ):
+        assert main([*vlm, *flags]) == 2
+        assert message in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
