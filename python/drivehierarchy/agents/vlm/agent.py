@@ -57,7 +57,7 @@ class VLMOptions:
     history: HistoryOptions = field(default_factory=HistoryOptions)
 
     def __post_init__(self) -> None:
-        self.history.check_payload(self.payload)
+        self.history.check_payload(self.effective_payload())
         if self.max_consecutive_transport_failures < 1:
             raise ConfigError(
                 "config `max_consecutive_transport_failures` = "
