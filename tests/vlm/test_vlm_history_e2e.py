@@ -5,10 +5,14 @@ uninterrupted run sends and ends with the same summary."""
 
 from __future__ import annotations
 
+import itertools
 import json
 from pathlib import Path
 
-from drivehierarchy.benchmark.r4 import report
+from conftest import short_scenarios
+from drivehierarchy.agents.vlm import VLMOptions
+from drivehierarchy.agents.vlm.history import HistoryOptions
+from drivehierarchy.benchmark.r4 import report, runner
 from drivehierarchy.cli import main
 from drivehierarchy.testing.openai_server import ChatRequest, Fault, ScriptedOpenAIServer, route_driver
 
@@ -87,3 +91,32 @@ def test_history_through_the_cli_with_an_outage_and_a_resume(tmp_path: Path, sui
     line = json.loads((cut / "results.jsonl").read_text().splitlines()[-1])
     assert line["inputs"] == summary["inputs"] and line["action_level"] == "control"
     assert report.row_label("test-model", summary) == "test-model [history 4 (+BEV), ego-history 2, memory 2]"
+
+
+def test_history_offsets_are_true_under_latency_aware(tmp_path: Path) -> None:
+    """With `--latency-aware` decisions are not evenly spaced: each past frame's label is how long
+    ago it really was (its tick), and the memory says when each decision was asked."""
+    server = ScriptedOpenAIServer(route_driver, latency_s=0.06)
+    server.keep_log = True
+    with server as url:
+        vlm = VLMOptions(
+            base_url=url, model="test-model", latency_aware=True, history=HistoryOptions(frames=2, memory=1)
+        )
+        (res,) = runner.evaluate(short_scenarios(1), tmp_path / "r", runner.RunOptions(agent="vlm", vlm=vlm))
+    log = [
+        json.loads(x)
+        for x in (tmp_path / "r" / "scenes" / res["key"] / "decisions.jsonl").read_text().splitlines()
+    ]
+    ticks = [d["tick"] for d in log]
+    assert len({b - a for a, b in itertools.pairwise(ticks)}) > 1, "uneven spacing expected"
+    for i, d in enumerate(log):
+        want = [round((ticks[i] - ticks[j]) * 0.05, 4) for j in range(max(0, i - 2), i)]
+        assert d["history_offsets_s"] == want
+    req = server.requests_log[5]
+    assert req.user_texts[0] == (
+        f"Front camera image at t-{(ticks[5] - ticks[3]) * 0.05:.2f} s (800x450, looking forward from the "
+        "ego vehicle's roof, 100 degree field of view):"
+    )
+    assert req.user_texts[-2].startswith(
+        f"Your previous decisions, oldest first: t-{(ticks[5] - ticks[4]) * 0.05:.2f} s (frame 5): "
+    )
