@@ -110,7 +110,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     rs.add_argument("dir", type=Path)
     rs.set_defaults(func=_rescore)
 
-    rep = cmds.add_parser("report", help="Table 2 (Markdown, CSV), bar plot and r4_summary.csv of runs")
+    rep = cmds.add_parser(
+        "report",
+        help="Table 2, the (model, action level, inputs) comparison in S_R4 and the CARLA dialect, plots "
+        "and r4_summary.csv of runs",
+    )
     rep.add_argument("runs", nargs="+", type=Path, help="r4 evaluate output directories")
     rep.add_argument("--out", type=Path, required=True)
     rep.add_argument("--paper", action="store_true", help="add the paper's rows of preset models")
