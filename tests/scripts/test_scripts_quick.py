@@ -28,6 +28,7 @@ QUICK: dict[str, str] = {
     "bench_sumo.py": "--quick",
     "bench_vector.py": "--quick",
     "bench_vlm_harness.py": "--quick",
+    "bench_vlm_history.py": "--quick",
     "gen_pyunicode_tables.py": "--quick",
     "soak.py": "--quick --out {tmp}/soak",
     "sumo_retention.py": "--quick --traci",

@@ -143,3 +143,55 @@ def test_generated_open_loop_set_end_to_end_against_a_real_server(
     assert main(["hierarchy", "report", f"tiny={run}", f"tiny={r4}", "--partial", "--out", str(out)]) == 0
     report = json.loads((out / "hierarchy.json").read_text())
     assert [m["model"] for m in report["models"]] == ["tiny"]
+
+
+def test_history_through_the_cli_with_a_resume_against_a_real_server(
+    served: tuple[str, str], tmp_path: Path
+) -> None:
+    """`--history 4 --memory 2` on a real server, through the parser: random weights never give a
+    valid action, so the scenario (about 20 decisions to its blocked timeout) is aborted; the
+    same command resumes it from scratch and rebuilds the same history."""
+    from drivehierarchy.cli import main
+
+    url, model = served
+    suite = short_scenarios(1)[0]
+    out = tmp_path / "hist"
+    argv = ["r4", "evaluate", "--agent", "vlm", "--base-url", url, "--model", model, "--suite", str(suite),
+            "--out", str(out), "--max-tokens", "8", "--history", "4", "--memory", "2"]  # fmt: skip
+    scene = out / "scenes" / runner.scenario_key(suite) / "decisions.jsonl"
+
+    def decisions() -> list[dict]:
+        drop = ("latency_s", "attempts")
+        return [
+            {k: v for k, v in json.loads(x).items() if k not in drop} for x in scene.read_text().splitlines()
+        ]
+
+    assert main(argv) == 3  # the batch-abort rule: no valid decision
+    first = decisions()
+    assert 5 < len(first) < 60
+    # Current front + BEV, plus the past fronts that exist: 0, 1, 2, 3, then 4.
+    assert [d["images"] for d in first] == [2 + min(n, 4) for n in range(len(first))]
+    assert [d["history_offsets_s"] for d in first[:6]] == [
+        [],
+        [0.25],
+        [0.5, 0.25],
+        [0.75, 0.5, 0.25],
+        [1.0, 0.75, 0.5, 0.25],
+        [1.0, 0.75, 0.5, 0.25],
+    ]
+    for d in first:  # whatever came back went through the Rust parser, and was held
+        assert d["transport_error"] is None and isinstance(d["raw"], str)
+        assert d["parsed"] is None and d["failure"] is not None
+    aborted = [json.loads(x) for x in (out / "aborted.jsonl").read_text().splitlines()]
+    assert len(aborted) == 1 and aborted[0]["aborted"] == "no_valid_decision"
+
+    assert main(argv) == 3  # resumed: the scenario is redone from its start
+    assert len((out / "aborted.jsonl").read_text().splitlines()) == 2
+    again = decisions()
+    assert [(d["prompt_hash"], d["images"], d["history_offsets_s"]) for d in again] == [
+        (d["prompt_hash"], d["images"], d["history_offsets_s"]) for d in first
+    ]
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["vlm"]["history"] == {
+        "frames": 4, "stride": 1, "bev": False, "ego": 0, "memory": 2, "shuffle": False, "freeze": False
+    }  # fmt: skip

@@ -41,10 +41,10 @@ def server_url() -> Iterator[str]:
         proc.wait(timeout=10)
 
 
-def _cmd(url: str, suite: Path, out: Path) -> list[str]:
+def _cmd(url: str, suite: Path, out: Path, extra: tuple[str, ...] = ()) -> list[str]:
     return [sys.executable, "-m", "drivehierarchy.cli", "r4", "evaluate", "--agent", "vlm",
             "--base-url", url, "--model", "test-model", "--suite", str(suite), "--out", str(out),
-            "--jobs", "2"]  # fmt: skip
+            "--jobs", "2", *extra]  # fmt: skip
 
 
 def _keys(out: Path) -> list[str]:
@@ -82,17 +82,30 @@ def _cmdline(pid: int) -> str:
     return ""
 
 
+def _decisions(path: Path) -> list[tuple]:
+    lines = [json.loads(x) for x in path.read_text().splitlines()]
+    return [(d["prompt_hash"], d["images"], d.get("history_offsets_s"), d["raw"]) for d in lines]
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [(), ("--history", "2", "--history-bev", "--ego-history", "2", "--memory", "2")],
+    ids=["paper", "history"],
+)
 def test_kill_9_then_rerun_equals_an_uninterrupted_run(
-    tmp_path: Path, suite_dir: Path, server_url: str
+    tmp_path: Path, suite_dir: Path, server_url: str, extra: tuple[str, ...]
 ) -> None:
+    """With history on too: the redone scenarios rebuild it from their start."""
     whole = tmp_path / "whole"
-    done = subprocess.run(_cmd(server_url, suite_dir, whole), capture_output=True, text=True, timeout=600)
+    done = subprocess.run(
+        _cmd(server_url, suite_dir, whole, extra), capture_output=True, text=True, timeout=600
+    )
     assert done.returncode == 0, done.stderr
     assert len(_keys(whole)) == 3
 
     out = tmp_path / "killed"
     proc = subprocess.Popen(
-        _cmd(server_url, suite_dir, out), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+        _cmd(server_url, suite_dir, out, extra), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
     )
     # Killed once a scenario is finished and the SUMO scenario (06) is in flight in its worker
     # process (with 2 jobs it runs in one); where /proc lists no children, after the first result.
@@ -116,7 +129,9 @@ def test_kill_9_then_rerun_equals_an_uninterrupted_run(
     assert 1 <= len(before) < 3
     mtimes = {k: (out / "scenes" / k / "scene_score.json").stat().st_mtime_ns for k in before}
 
-    again = subprocess.run(_cmd(server_url, suite_dir, out), capture_output=True, text=True, timeout=600)
+    again = subprocess.run(
+        _cmd(server_url, suite_dir, out, extra), capture_output=True, text=True, timeout=600
+    )
     assert again.returncode == 0, again.stderr
     assert again.stdout.count("done before, skipped") == len(before)
     after = _keys(out)
@@ -128,3 +143,7 @@ def test_kill_9_then_rerun_equals_an_uninterrupted_run(
         assert (out / "scenes" / k / "decisions.jsonl").read_text().count("\n") == json.loads(
             (out / "scenes" / k / "scene_score.json").read_text()
         )["decisions"]
+        # Every request as the uninterrupted run's (texts, image counts, history offsets, replies).
+        assert _decisions(out / "scenes" / k / "decisions.jsonl") == _decisions(
+            whole / "scenes" / k / "decisions.jsonl"
+        )

@@ -19,7 +19,9 @@ from typing import Any
 
 import gymnasium as gym
 
+from drivehierarchy import _core
 from drivehierarchy._core import ConfigError
+from drivehierarchy.agents.vlm.history import DecisionHistory, HistoryOptions
 from drivehierarchy.agents.vlm.payload import PayloadOptions, build_messages, prompt_hash
 from drivehierarchy.agents.vlm.presets import ModelPreset, resolve_model
 from drivehierarchy.agents.vlm.transport import (
@@ -33,6 +35,7 @@ from drivehierarchy.agents.vlm.transport import (
 # bound, which keeps a rambling model's latency bounded (a reply is two short lines). The
 # repetition penalty is left at the server's neutral default rather than sent as 1.0, so strict
 # servers (`transformers serve`) accept the request.
+TICK_S: float = _core.constants()["tick_s"]  # the protocol's simulation step
 CLOSED_LOOP_DECODING = DecodingConfig(temperature=0.0, top_p=1.0, max_tokens=256, repetition_penalty=None)
 
 
@@ -50,8 +53,11 @@ class VLMOptions:
     # `server_unavailable` (redone on resume) instead of being driven on held controls.
     max_consecutive_transport_failures: int = 3
     latency_aware: bool = False
+    # Past frames, ego states and decisions (this project's extension, docs/vlm.md#history-and-memory).
+    history: HistoryOptions = field(default_factory=HistoryOptions)
 
     def __post_init__(self) -> None:
+        self.history.check_payload(self.effective_payload())
         if self.max_consecutive_transport_failures < 1:
             raise ConfigError(
                 "config `max_consecutive_transport_failures` = "
@@ -97,6 +103,31 @@ class VLMOptions:
             "max_retries": self.max_retries,
             "max_consecutive_transport_failures": self.max_consecutive_transport_failures,
             "latency_aware": self.latency_aware,
+            "history": self.history.manifest(),
+        }
+
+    def inputs(self) -> dict[str, Any]:
+        """What the model is given, as `r4 report` compares runs (docs/vlm.md#history-and-memory)."""
+        h, p = self.history, self.effective_payload()
+        controls = [
+            name
+            for name, on in (
+                ("blind", p.blind),
+                ("no-bev", p.no_bev),
+                (f"corrupt-{p.corrupt}", p.corrupt is not None),
+                ("latency-aware", self.latency_aware),
+                ("history-shuffle", h.shuffle),
+                ("history-freeze", h.freeze),
+            )
+            if on
+        ]
+        return {
+            "history": h.frames,
+            "stride": h.stride if (h.frames or h.ego) else 1,
+            "history_bev": h.bev,
+            "ego_history": h.ego,
+            "memory": h.memory,
+            "controls": controls,
         }
 
     def transport_kwargs(self) -> dict[str, Any]:
@@ -168,14 +199,30 @@ class VLMAgent:
         self.decision = 0
         self.seed = 0
         self.log: list[dict[str, Any]] = []
+        self.history = (
+            DecisionHistory(options.history, self.payload, TICK_S) if options.history.enabled else None
+        )
+        self._sim: Any = None
 
     def reset(self, env: gym.Env[Any, Any], info: dict[str, Any]) -> None:
         self.decision = 0
         self.log = []
+        self._sim = getattr(env.unwrapped, "sim", None)
+        if self.history is not None:
+            self.history.reset(self.seed)
 
     def act(self, observation: dict[str, Any], info: dict[str, Any]) -> str | None:
+        if self.history is not None and self.decision:
+            reply = info.get("reply")
+            self.history.record_reply(self.decision, reply if isinstance(reply, dict) else None)
         self.decision += 1
-        messages = build_messages(observation, self.decision, self.payload, seed=self.seed)
+        if self.history is not None:
+            ego = (
+                self._sim.ego_array().tolist() if self.options.history.ego and self._sim is not None else None
+            )
+            messages = self.history.messages(observation, self.decision, int(info.get("tick", 0)), ego)
+        else:
+            messages = build_messages(observation, self.decision, self.payload, seed=self.seed)
         h = prompt_hash(messages)
         t0 = time.monotonic()
         try:

@@ -1,4 +1,5 @@
-"""The message one R4 decision sends to a VLM (docs/protocol.md#r4-loop): one user turn, no history.
+"""The message one R4 decision sends to a VLM (docs/protocol.md#r4-loop): one user turn, no history
+(`history.py` adds past frames, ego states and decisions, this project's extension).
 
 Laid out as the original's VLM service wraps it: a front-camera descriptor text, the front image,
 a BEV descriptor text, the BEV image, then `Q(frame {n}): ` + the decision text the env produced
@@ -100,12 +101,40 @@ def jpeg_bytes(img: np.ndarray, quality: int = JPEG_QUALITY) -> bytes:
     return bytes(simplejpeg.encode_jpeg(img, quality=quality, colorspace="RGB", colorsubsampling="420"))
 
 
-def jpeg_data_url(img: np.ndarray, quality: int = JPEG_QUALITY) -> str:
-    return "data:image/jpeg;base64," + base64.b64encode(jpeg_bytes(img, quality)).decode("ascii")
+class DataURL(str):
+    """A base64 data URL: none of its characters needs escaping in JSON, so the transport writes
+    it into a request body as it is (`transport.encode_body`), without scanning it again each time
+    it is sent (a past frame is sent with every decision that carries it)."""
+
+    __slots__ = ()
+
+
+def jpeg_data_url(img: np.ndarray, quality: int = JPEG_QUALITY) -> DataURL:
+    return DataURL("data:image/jpeg;base64," + base64.b64encode(jpeg_bytes(img, quality)).decode("ascii"))
 
 
 def question_text(prompt: str, decision: int) -> str:
     return f"Q(frame {decision}): {prompt}"
+
+
+def encode_images(
+    obs: dict[str, Any], decision: int, options: PayloadOptions, *, seed: int = 0
+) -> list[tuple[str, int, int, str]]:
+    """The message's images of `obs`, in order, as (key, width, height, data URL)."""
+    images: list[tuple[str, int, int, str]] = []
+    for key in options.images:
+        if key not in obs:
+            raise ConfigError(
+                f"config `{key}` = None: the VLM agent sends the {key} image (use --no-bev/--blind "
+                "to drop it)"
+            )
+        img = obs[key]
+        if options.corrupt is not None:
+            # Seeded by episode seed and decision, so a corrupted run is reproducible.
+            img = corrupt_image(img, options.corrupt, seed * 1_000_003 + decision * 2 + (key == "bev"))
+        h, w = img.shape[:2]
+        images.append((key, int(w), int(h), jpeg_data_url(img, options.jpeg_quality)))
+    return images
 
 
 def build_messages(
@@ -116,20 +145,10 @@ def build_messages(
     if "prompt" not in obs:
         raise ConfigError("config `prompt` = False: the VLM agent needs the env's prompt observation")
     content: list[dict[str, Any]] = []
-    for key in opts.images:
-        if key not in obs:
-            raise ConfigError(
-                f"config `{key}` = None: the VLM agent sends the {key} image (use --no-bev/--blind "
-                "to drop it)"
-            )
-        img = obs[key]
-        if opts.corrupt is not None:
-            # Seeded by episode seed and decision, so a corrupted run is reproducible.
-            img = corrupt_image(img, opts.corrupt, seed * 1_000_003 + decision * 2 + (key == "bev"))
-        h, w = img.shape[:2]
+    for key, w, h, url in encode_images(obs, decision, opts, seed=seed):
         text = front_descriptor(w, h) if key == "front" else bev_descriptor(w)
         content.append({"type": "text", "text": text})
-        content.append({"type": "image_url", "image_url": {"url": jpeg_data_url(img, opts.jpeg_quality)}})
+        content.append({"type": "image_url", "image_url": {"url": url}})
     content.append({"type": "text", "text": question_text(obs["prompt"], decision)})
     return [{"role": "user", "content": content}]
 

@@ -18,6 +18,8 @@ open-loop runner's worker threads).
 from __future__ import annotations
 
 import asyncio
+import inspect
+import json
 import random
 import threading
 import time
@@ -105,6 +107,44 @@ def check_base_url(base_url: str) -> str:
     return base_url.rstrip("/")
 
 
+# Stands for a data URL while the rest of a body is serialised (private-use characters: never in
+# a prompt; if one ever is, `encode_body` falls back to serialising everything).
+_URL_MARK = "\ue000drivehierarchy-data-url\ue000"
+_URL_MARK_JSON = json.dumps(_URL_MARK, ensure_ascii=False)
+
+
+def encode_body(body: dict[str, Any]) -> bytes:
+    """`body` as the JSON bytes the SDK would send (UTF-8, compact separators), with every
+    `payload.DataURL` written in as it is instead of being scanned for characters to escape:
+    most of a request's bytes are its base64 images, and with history the same frame is sent with
+    several decisions."""
+    from drivehierarchy.agents.vlm.payload import DataURL
+
+    urls: list[str] = []
+
+    def swap(part: Any) -> Any:
+        image = part.get("image_url") if isinstance(part, dict) else None
+        if isinstance(image, dict) and type(image.get("url")) is DataURL:
+            urls.append(image["url"])
+            return {**part, "image_url": {**image, "url": _URL_MARK}}
+        return part
+
+    messages = [
+        {**m, "content": [swap(p) for p in m["content"]]}
+        if isinstance(m, dict) and isinstance(m.get("content"), list)
+        else m
+        for m in body.get("messages", [])
+    ]
+    text = json.dumps({**body, "messages": messages}, ensure_ascii=False, separators=(",", ":"))
+    pieces = text.split(_URL_MARK_JSON)
+    if len(pieces) != len(urls) + 1:
+        return json.dumps(body, ensure_ascii=False, separators=(",", ":")).encode("utf-8")
+    out = [pieces[0]]
+    for url, piece in zip(urls, pieces[1:], strict=True):
+        out += ['"', url, '"', piece]
+    return "".join(out).encode("utf-8")
+
+
 class AsyncChatTransport:
     """POSTs to `{base_url}/chat/completions` (base_url as for the OpenAI SDK, e.g. `.../v1`).
 
@@ -151,6 +191,9 @@ class AsyncChatTransport:
             max_retries=0,
             http_client=openai.DefaultAsyncHttpxClient(limits=limits),
         )
+        # Our own serialisation (`encode_body`) goes out through `post(content=...)` where the SDK
+        # has it.
+        self._post_content = "content" in inspect.signature(self._client.post).parameters
 
     def payload(self, messages: list[dict[str, Any]]) -> dict[str, Any]:
         """The request body this transport sends for `messages`."""
@@ -180,9 +223,16 @@ class AsyncChatTransport:
             try:
                 # `post` with the finished body: the SDK's typed-params walk over the two
                 # base64 images costs ~2 ms per request, a third of the client's CPU per decision.
-                resp = await self._client.post(
-                    "/chat/completions", cast_to=self._completion_type, body=self.payload(messages)
-                )
+                if self._post_content:
+                    resp = await self._client.post(
+                        "/chat/completions",
+                        cast_to=self._completion_type,
+                        content=encode_body(self.payload(messages)),
+                    )
+                else:  # an SDK before `content=`: it serialises the body itself
+                    resp = await self._client.post(
+                        "/chat/completions", cast_to=self._completion_type, body=self.payload(messages)
+                    )
             except oa.APITimeoutError as exc:
                 last = RequestTimeout(f"no reply within {self.timeout_s:g} s: {exc}", attempts=attempt)
             except oa.APIConnectionError as exc:

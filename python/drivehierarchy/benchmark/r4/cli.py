@@ -56,6 +56,32 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
             action="store_true",
             help="control: the world keeps moving for each reply's latency (previous control held)",
         )
+        h = p.add_argument_group(
+            "VLM history and memory (this project's extension of the protocol, docs/vlm.md)"
+        )
+        h.add_argument("--history", type=int, default=0, metavar="N", help="send the last N front frames too")
+        h.add_argument(
+            "--stride", type=int, default=1, metavar="S", help="decisions between two past frames (default 1)"
+        )
+        h.add_argument("--history-bev", action="store_true", help="send the past frames' BEVs too")
+        h.add_argument(
+            "--ego-history",
+            type=int,
+            default=0,
+            metavar="K",
+            help="the ego's last K positions and speeds as text",
+        )
+        h.add_argument(
+            "--memory", type=int, default=0, metavar="K", help="the model's own last K decisions as text"
+        )
+        h.add_argument(
+            "--history-shuffle",
+            action="store_true",
+            help="control: the past frames in a seeded random order (their labels stay in place)",
+        )
+        h.add_argument(
+            "--history-freeze", action="store_true", help="control: every past frame is the current one"
+        )
 
     run = cmds.add_parser("run", help="drive one scenario")
     run.add_argument("--scenario", required=True, help="scenario file or built-in id")
@@ -84,7 +110,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     rs.add_argument("dir", type=Path)
     rs.set_defaults(func=_rescore)
 
-    rep = cmds.add_parser("report", help="Table 2 (Markdown, CSV), bar plot and r4_summary.csv of runs")
+    rep = cmds.add_parser(
+        "report",
+        help="Table 2, the (model, action level, inputs) comparison in S_R4 and the CARLA dialect, plots "
+        "and r4_summary.csv of runs",
+    )
     rep.add_argument("runs", nargs="+", type=Path, help="r4 evaluate output directories")
     rep.add_argument("--out", type=Path, required=True)
     rep.add_argument("--paper", action="store_true", help="add the paper's rows of preset models")
@@ -100,8 +130,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     gal.set_defaults(func=_gallery)
 
 
+_HISTORY_FLAGS = ("history", "history_bev", "ego_history", "memory", "history_shuffle", "history_freeze")
+
+
 def _vlm_options(args: argparse.Namespace) -> object | None:
-    vlm_flags = [f for f in ("base_url", "model", "api_key_env") if getattr(args, f)]
+    vlm_flags = [f for f in ("base_url", "model", "api_key_env", *_HISTORY_FLAGS) if getattr(args, f)]
+    if args.stride != 1:
+        vlm_flags.append("stride")
     if args.agent != runner.VLM_AGENT:
         if vlm_flags:
             raise ConfigError(f"--{vlm_flags[0].replace('_', '-')}: only for --agent vlm")
@@ -109,6 +144,7 @@ def _vlm_options(args: argparse.Namespace) -> object | None:
     if not args.base_url or not args.model:
         raise ConfigError("--agent vlm: needs --base-url and --model")
     from drivehierarchy.agents.vlm import PayloadOptions, VLMOptions
+    from drivehierarchy.agents.vlm.history import HistoryOptions
     from drivehierarchy.agents.vlm.transport import DecodingConfig
 
     return VLMOptions(
@@ -123,6 +159,15 @@ def _vlm_options(args: argparse.Namespace) -> object | None:
         max_retries=args.max_retries,
         max_consecutive_transport_failures=args.max_transport_failures,
         latency_aware=args.latency_aware,
+        history=HistoryOptions(
+            frames=args.history,
+            stride=args.stride,
+            bev=args.history_bev,
+            ego=args.ego_history,
+            memory=args.memory,
+            shuffle=args.history_shuffle,
+            freeze=args.history_freeze,
+        ),
     )
 
 

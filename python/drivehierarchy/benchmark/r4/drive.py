@@ -47,6 +47,7 @@ def finish_scene(
         "steps": steps,
         "wall_s": round(wall, 4),
         "score": record,
+        **opts.run_facts(),
         **extra,
     }
 

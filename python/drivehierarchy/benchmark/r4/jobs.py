@@ -13,6 +13,16 @@ from drivehierarchy._core import ConfigError
 from drivehierarchy.envs.config import R4Config
 from drivehierarchy.scenarios import builtin_scenarios, sumo_home
 
+# The paper's inputs: the current frames and the decision text, no history, no controls.
+NO_INPUTS: dict[str, Any] = {
+    "history": 0,
+    "stride": 1,
+    "history_bev": False,
+    "ego_history": 0,
+    "memory": 0,
+    "controls": [],
+}
+
 
 @dataclass(frozen=True)
 class Job:
@@ -56,7 +66,29 @@ class RunOptions:
         if self.vlm is not None:
             m = self.vlm.manifest()
             ident["vlm"] = {k: m[k] for k in ("model", "decoding", "payload", "latency_aware")}
+            if self.vlm.history.enabled:
+                # Only when used, so directories of runs from before history existed still resume.
+                ident["vlm"]["history"] = m["history"]
+        if self.action_level() != "control":
+            ident["action_level"] = self.action_level()
         return ident
+
+    def action_level(self) -> str:
+        """How the agent drives (`r4 report`'s level column): `control` is the paper's
+        `[steer, target_speed]` decision (and the raw control of RL agents)."""
+        mode = str(self.config.action_mode)
+        return "control" if mode in ("decision", "raw") else mode
+
+    def inputs(self) -> dict[str, Any]:
+        """What the agent is given beyond the paper's one turn (`r4 report`'s input columns)."""
+        if self.vlm is not None:
+            inputs: dict[str, Any] = self.vlm.inputs()
+            return inputs
+        return dict(NO_INPUTS)
+
+    def run_facts(self) -> dict[str, Any]:
+        """Recorded in the manifest, every results line and the summary."""
+        return {"action_level": self.action_level(), "inputs": self.inputs()}
 
     def model_name(self) -> str:
         return str(self.vlm.served_model) if self.vlm is not None else self.agent

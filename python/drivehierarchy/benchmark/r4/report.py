@@ -4,6 +4,12 @@ Markdown and CSV, a per-category bar plot, and `r4_summary.csv` (`model,r4_score
 
 Columns are the scenario categories present, labelled `Sce N` from the category folder's number
 prefix (`01_pedestrian` → Sce 1); Avg.Score is the mean of the category means (the R4 score).
+
+Runs are rows by (model, action level, inputs): the same model driven with history, memory or a
+control is another row (labelled `model [inputs]` in Table 2). `comparison.{md,csv}` puts those
+columns side by side, `comparison_carla.{md,csv}` gives the same rows in the CARLA-leaderboard
+dialect (driving score, route completion, infraction penalty) and `r4_comparison.png` draws both
+per category (docs/vlm.md#report).
 """
 
 from __future__ import annotations
@@ -106,7 +112,42 @@ def write_run_tables(out: Path, summary: dict[str, Any], model: str) -> None:
     (out / "r4_summary.csv").write_text(r4_summary_csv(runs), encoding="utf-8")
 
 
+def run_inputs(summary: dict[str, Any]) -> tuple[str, dict[str, Any]]:
+    """(action level, inputs) of a run's summary; a summary written before they were recorded is
+    the paper's setting."""
+    from drivehierarchy.benchmark.r4.jobs import NO_INPUTS
+
+    return str(summary.get("action_level") or "control"), {**NO_INPUTS, **(summary.get("inputs") or {})}
+
+
+def inputs_text(inputs: dict[str, Any]) -> str:
+    """`history 4 (stride 2, +BEV), ego-history 4, memory 2, history-shuffle`; "" for the paper's."""
+    parts = []
+    if inputs["history"]:
+        extra = [f"stride {inputs['stride']}"] if inputs["stride"] != 1 else []
+        extra += ["+BEV"] if inputs["history_bev"] else []
+        parts.append(f"history {inputs['history']}" + (f" ({', '.join(extra)})" if extra else ""))
+    if inputs["ego_history"]:
+        stride = f" (stride {inputs['stride']})" if inputs["stride"] != 1 and not inputs["history"] else ""
+        parts.append(f"ego-history {inputs['ego_history']}{stride}")
+    if inputs["memory"]:
+        parts.append(f"memory {inputs['memory']}")
+    parts += list(inputs["controls"])
+    return ", ".join(parts)
+
+
+def row_label(model: str, summary: dict[str, Any]) -> str:
+    """The run's row name: the model, plus its level and inputs when they are not the paper's."""
+    level, inputs = run_inputs(summary)
+    extra = [level] if level != "control" else []
+    text = inputs_text(inputs)
+    extra += [text] if text else []
+    return f"{model} [{'; '.join(extra)}]" if extra else model
+
+
 def read_run(run: Path) -> tuple[str, dict[str, Any]]:
+    """(row label, summary) of a run directory; the summary gains the CARLA dialect when it was
+    written before the summary carried it."""
     path = run / "summary.json"
     if not run.exists():
         raise ConfigError(f"{run}: does not exist (expected an `r4 evaluate` output directory)")
@@ -115,7 +156,134 @@ def read_run(run: Path) -> tuple[str, dict[str, Any]]:
     summary = json.loads(path.read_text(encoding="utf-8"))
     if not summary.get("categories"):
         raise ConfigError(f"{path}: field `categories` is empty: nothing to report")
-    return str(summary.get("model") or run.name), summary
+    if "carla" not in summary:
+        from drivehierarchy.benchmark.r4.store import read_results
+        from drivehierarchy.benchmark.r4.summary import carla_summary
+
+        summary["carla"] = carla_summary(list(read_results(run).values()))
+    summary.setdefault("model", run.name)
+    return row_label(str(summary["model"]), summary), summary
+
+
+_KEY_HEAD = ["model", "action_level", "history", "stride", "history_bev", "ego_history", "memory", "controls"]
+_KEY_MD = ["Model", "Level", "History", "Stride", "Hist. BEV", "Ego hist.", "Memory", "Controls"]
+
+
+def _key_cells(summary: dict[str, Any]) -> list[str]:
+    level, inputs = run_inputs(summary)
+    return [
+        str(summary.get("model", "")),
+        level,
+        str(inputs["history"]),
+        str(inputs["stride"]),
+        "yes" if inputs["history_bev"] else "no",
+        str(inputs["ego_history"]),
+        str(inputs["memory"]),
+        " ".join(inputs["controls"]) or "none",
+    ]
+
+
+def _carla(summary: dict[str, Any]) -> dict[str, Any] | None:
+    carla: dict[str, Any] | None = summary.get("carla")
+    return carla
+
+
+def _rank(values: list[float | None]) -> list[int | None]:
+    order = sorted((i for i, v in enumerate(values) if v is not None), key=lambda i: -(values[i] or 0.0))
+    ranks: list[int | None] = [None] * len(values)
+    for rank, i in enumerate(order, 1):
+        ranks[i] = rank
+    return ranks
+
+
+def comparison_rows(runs: list[tuple[str, dict[str, Any]]]) -> tuple[list[str], list[dict[str, Any]]]:
+    """One row per (model, level, inputs): key cells, S_R4 per category and overall, the CARLA
+    dialect per category and overall, rank by S_R4 and by driving score."""
+    cats = sorted({c for _, s in runs for c in s["categories"]})
+    rows = []
+    for label, s in runs:
+        carla = _carla(s)
+        rows.append(
+            {
+                "label": label,
+                "keys": _key_cells(s),
+                "r4": {c: s["categories"].get(c) for c in cats},
+                "r4_score": s["r4_score"],
+                "ds": {c: (carla or {}).get("categories", {}).get(c) for c in cats},
+                "driving_score": carla["driving_score"] if carla else None,
+                "route_completion": carla["route_completion"] if carla else None,
+                "infraction_penalty": carla["infraction_penalty"] if carla else None,
+            }
+        )
+    for row, rank in zip(rows, _rank([r["r4_score"] for r in rows]), strict=True):
+        row["rank"] = rank
+    for row, rank in zip(rows, _rank([r["driving_score"] for r in rows]), strict=True):
+        row["ds_rank"] = rank
+    return cats, rows
+
+
+def _num(v: float | None, digits: int) -> str:
+    return "–" if v is None else f"{v:.{digits}f}"
+
+
+def comparison_markdown(runs: list[tuple[str, dict[str, Any]]], dialect: str = "r4") -> str:
+    """`dialect="r4"`: mean S_R4 per category; `"carla"`: the CARLA-leaderboard driving score."""
+    cats, rows = comparison_rows(runs)
+    if dialect == "r4":
+        tail = ["S_R4", "Rank"]
+    else:
+        tail = ["Driving score", "Route completion", "Infraction penalty", "Rank"]
+    head = [*_KEY_MD, *[category_label(c) for c in cats], *tail]
+    lines = [
+        "| " + " | ".join(head) + " |",
+        "|---" * len(_KEY_MD) + "|---:" * (len(head) - len(_KEY_MD)) + "|",
+    ]
+    for r in rows:
+        if dialect == "r4":
+            vals = [_num(r["r4"][c], 3) for c in cats] + [_num(r["r4_score"], 3), str(r["rank"])]
+        else:
+            vals = [_num(r["ds"][c], 3) for c in cats]
+            vals += [_num(r["driving_score"], 3), _num(r["route_completion"], 3)]
+            vals += [_num(r["infraction_penalty"], 3), str(r["ds_rank"] or "–")]
+        lines.append("| " + " | ".join([*r["keys"], *vals]) + " |")
+    legend = ", ".join(f"{category_label(c)} = {c}" for c in cats)
+    what = (
+        "Scores are mean S_R4 (0–100), the mean of category means."
+        if dialect == "r4"
+        else "CARLA-leaderboard dialect of the same runs (not the protocol score): driving score = route "
+        "completion × infraction penalty × (1 − off-road share), per category the mean of its runs, "
+        "overall the mean of category means; route completion and infraction penalty are means over runs."
+    )
+    return "\n".join(lines) + f"\n\n{legend}. {what}\n"
+
+
+def comparison_csv(runs: list[tuple[str, dict[str, Any]]], dialect: str = "r4") -> str:
+    cats, rows = comparison_rows(runs)
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    if dialect == "r4":
+        w.writerow([*_KEY_HEAD, *cats, "r4_score", "rank"])
+        for r in rows:
+            w.writerow([*r["keys"], *[_csv(r["r4"][c]) for c in cats], _csv(r["r4_score"]), r["rank"]])
+    else:
+        tail = ["driving_score", "route_completion", "infraction_penalty", "rank"]
+        w.writerow([*_KEY_HEAD, *cats, *tail])
+        for r in rows:
+            w.writerow(
+                [
+                    *r["keys"],
+                    *[_csv(r["ds"][c]) for c in cats],
+                    _csv(r["driving_score"]),
+                    _csv(r["route_completion"]),
+                    _csv(r["infraction_penalty"]),
+                    "" if r["ds_rank"] is None else r["ds_rank"],
+                ]
+            )
+    return buf.getvalue()
+
+
+def _csv(v: float | None) -> str:
+    return "" if v is None else f"{v:.6f}"
 
 
 def paper_runs(models: list[str]) -> list[tuple[str, dict[str, Any]]]:
@@ -170,25 +338,76 @@ def bar_plot(runs: list[tuple[str, dict[str, Any]]], path: Path) -> None:
     plt.close(fig)
 
 
+def comparison_plot(runs: list[tuple[str, dict[str, Any]]], path: Path) -> None:
+    """Grouped bars per category, one bar per (model, level, inputs) row: S_R4 above, the CARLA
+    driving score below (when every run has it)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    cats, rows = comparison_rows(runs)
+    panels = [("r4", "mean S_R4", "r4_score")]
+    if all(r["driving_score"] is not None for r in rows):
+        panels.append(("ds", "CARLA driving score", "driving_score"))
+    labels = [*[category_name(c) for c in cats], "Mean of categories"]
+    x = np.arange(len(labels))
+    width = 0.8 / max(1, len(rows))
+    fig, axes = plt.subplots(
+        len(panels),
+        1,
+        figsize=(max(7.0, 1.1 * len(labels) + 2), 3.4 * len(panels) + 0.4 + 0.25 * len(rows)),
+        squeeze=False,
+        layout="constrained",
+    )
+    for ax, (key, ylabel, overall) in zip(axes[:, 0], panels, strict=True):
+        for i, r in enumerate(rows):
+            vals = [r[key][c] if r[key][c] is not None else 0.0 for c in cats] + [r[overall]]
+            ax.bar(x + (i - (len(rows) - 1) / 2) * width, vals, width, label=r["label"])
+        ax.axvline(len(cats) - 0.5, color="0.6", linewidth=0.8)
+        ax.set_xticks(x, labels, rotation=30, ha="right")
+        ax.set_ylabel(ylabel)
+        ax.set_ylim(0, 100)
+    axes[0, 0].set_title("R4 by model, action level and inputs")
+    handles, names = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, names, fontsize="small", loc="outside lower center")
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def build_report(run_dirs: list[Path], out: Path, *, paper: bool = False, plot: bool = True) -> list[Path]:
-    """Table 2 (Markdown, CSV), r4_summary.csv and the bar plot for several runs."""
+    """Table 2 (Markdown, CSV), r4_summary.csv, the (model, level, inputs) comparison in both
+    dialects and the bar plots for several runs."""
     if not run_dirs:
         raise ConfigError("r4 report: no run directories given")
     runs = [read_run(r) for r in run_dirs]
     names = [n for n, _ in runs]
-    if len(set(names)) != len(names):
-        raise ConfigError(f"r4 report: two runs report the same model name ({names}); one row per model")
+    seen: dict[str, Path] = {}
+    for name, run in zip(names, run_dirs, strict=True):
+        if name in seen:
+            raise ConfigError(
+                f"r4 report: {seen[name]} and {run} are the same model, action level and inputs "
+                f"({name!r}); one row per combination"
+            )
+        seen[name] = run
     out.mkdir(parents=True, exist_ok=True)
-    table_runs = runs + (paper_runs(names) if paper else [])
+    models = list(dict.fromkeys(str(s["model"]) for _, s in runs))
+    table_runs = runs + (paper_runs(models) if paper else [])
     written = []
     for name, text in (
         ("table2.md", table_markdown(table_runs)),
         ("table2.csv", table_csv(table_runs)),
         ("r4_summary.csv", r4_summary_csv(runs)),
+        ("comparison.md", comparison_markdown(runs)),
+        ("comparison.csv", comparison_csv(runs)),
+        ("comparison_carla.md", comparison_markdown(runs, "carla")),
+        ("comparison_carla.csv", comparison_csv(runs, "carla")),
     ):
         (out / name).write_text(text, encoding="utf-8")
         written.append(out / name)
     if plot:
         bar_plot(table_runs, out / "r4_categories.png")
-        written.append(out / "r4_categories.png")
+        comparison_plot(runs, out / "r4_comparison.png")
+        written += [out / "r4_categories.png", out / "r4_comparison.png"]
     return written

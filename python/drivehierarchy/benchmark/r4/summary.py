@@ -47,6 +47,7 @@ def summarize(results: list[dict[str, Any]], failed: list[str] | None = None) ->
         ]
         lo, hi = np.percentile(np.mean(cat_means, axis=0), [2.5, 97.5])
         r4_ci = [float(lo), float(hi)]
+    carla = carla_summary(results)
     vlm = [r["vlm"] for r in results if r.get("vlm")]
     out: dict[str, Any] = {
         "categories": cats,
@@ -59,6 +60,8 @@ def summarize(results: list[dict[str, Any]], failed: list[str] | None = None) ->
         "completed": sum(r["score"]["termination_reason"] == "destination_reached" for r in results),
         "failed": sorted(failed or []),
     }
+    if carla is not None:
+        out["carla"] = carla
     if vlm:
         out["decisions"] = sum(v["decisions"] for v in vlm)
         out["parse_failures"] = sum(v["parse_failures"] for v in vlm)
@@ -66,9 +69,34 @@ def summarize(results: list[dict[str, Any]], failed: list[str] | None = None) ->
     return out
 
 
+def carla_summary(results: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """The CARLA-leaderboard dialect of the same runs (`dialects.carla` of each record): driving
+    score per category (mean over its runs) and their mean, like S_R4; route completion and
+    infraction penalty as means over all runs. None when a record has no dialect."""
+    dialects = [r["score"].get("dialects", {}).get("carla") for r in results]
+    if not results or any(d is None for d in dialects):
+        return None
+    by_cat: dict[str, list[float]] = {}
+    for r, d in zip(results, dialects, strict=True):
+        by_cat.setdefault(r["category"], []).append(float(d["driving_score"]))
+    cats = {c: float(np.mean(v)) for c, v in sorted(by_cat.items())}
+    return {
+        "categories": cats,
+        "driving_score": float(np.mean(list(cats.values()))),
+        "route_completion": float(np.mean([d["route_completion"] for d in dialects])),
+        "infraction_penalty": float(np.mean([d["infraction_penalty"] for d in dialects])),
+    }
+
+
 def write_summary(
-    out: Path, results: list[dict[str, Any]], model: str | None = None, failed: list[str] | None = None
+    out: Path,
+    results: list[dict[str, Any]],
+    model: str | None = None,
+    failed: list[str] | None = None,
+    facts: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
+    """`facts`: the run's action level and inputs (`RunOptions.run_facts`), which `r4 report`
+    compares."""
     from drivehierarchy.benchmark.r4 import report
 
     if not results:
@@ -76,6 +104,7 @@ def write_summary(
     summary = summarize(results, failed)
     if model is not None:
         summary["model"] = model
+    summary.update(facts or {})
     write_json_atomic(out / "summary.json", summary)
     rows = [
         "scenario,category,seed,status,termination_reason,score_route,score_safety,score_efficiency,"
@@ -89,7 +118,7 @@ def write_summary(
         )
     write_text_atomic(out / "summary.csv", "\n".join(rows) + "\n")
     write_text_atomic(out / "summary.md", summary_table(results, summary))
-    report.write_run_tables(out, summary, model or "model")
+    report.write_run_tables(out, summary, report.row_label(model or "model", summary))
     return summary
 
 

@@ -11,13 +11,19 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from drivehierarchy import _core
 from drivehierarchy.benchmark.r4.drive import VIDEO_CAMERA, finish_scene, save_frames
 from drivehierarchy.benchmark.r4.jobs import Job, RunOptions
 from drivehierarchy.benchmark.r4.store import fresh_scene_dir, write_json_atomic
 from drivehierarchy.envs.config import R4Config
+
+if TYPE_CHECKING:
+    from drivehierarchy.agents.vlm.history import HistoryOptions
+
+
+TICK_S: float = _core.constants()["tick_s"]  # the protocol's simulation step
 
 
 @dataclass
@@ -46,7 +52,14 @@ class VlmScene:
     only the built message, the step's info and the final record travel."""
 
     def __init__(
-        self, scenario: Path, config: R4Config, scene_dir: Path, payload: Any, frames: bool, video: bool
+        self,
+        scenario: Path,
+        config: R4Config,
+        scene_dir: Path,
+        payload: Any,
+        frames: bool,
+        video: bool,
+        history: HistoryOptions | None = None,
     ) -> None:
         from drivehierarchy.envs.r4 import DriveHierarchyR4Env
 
@@ -56,27 +69,54 @@ class VlmScene:
         self.frames = frames
         self.gif = _core.GifWriter(str(scene_dir / "episode.gif"), fps=4) if video else None
         self.obs: dict[str, Any] = {}
+        self.tick = 0
+        from drivehierarchy.agents.vlm.history import DecisionHistory
+
+        # The episode's past frames and decisions: rebuilt from the start whenever the scenario is
+        # (re)driven, so a resumed run sends what an uninterrupted one sends.
+        self.history = (
+            DecisionHistory(history, payload, TICK_S) if history is not None and history.enabled else None
+        )
 
     def reset(self, seed: int) -> dict[str, Any]:
         self.obs, info = self.env.reset(seed=seed)
+        self.tick = int(info.get("tick", 0))
+        if self.history is not None:
+            self.history.reset(seed)
         return dict(info)
 
     def messages(self, decision: int, seed: int) -> list[dict[str, Any]]:
         from drivehierarchy.agents.vlm.payload import build_messages
 
-        return build_messages(self.obs, decision, self.payload, seed=seed)
+        if self.history is None:
+            return build_messages(self.obs, decision, self.payload, seed=seed)
+        ego = self.env.sim.ego_array().tolist() if self.history.options.ego else None
+        return self.history.messages(self.obs, decision, self.tick, ego)
+
+    def messages_logged(self, decision: int, seed: int) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+        """`messages` and the decision log's history fields (the past frames' offsets)."""
+        messages = self.messages(decision, seed)
+        if self.history is None or not self.history.options.frames:
+            return messages, {}
+        return messages, {"history_offsets_s": list(self.history.last_offsets_s)}
 
     def step(self, raw: str | None, decision: int) -> tuple[bool, bool, dict[str, Any]]:
         self.obs, _reward, terminated, truncated, info = self.env.step(raw)
-        self._record(decision)
+        self._after(decision, info, info.get("reply"))
         return terminated, truncated, dict(info)
 
     def step_latency_aware(
         self, raw: str | None, held: int, interval: int, decision: int
     ) -> tuple[bool, bool, dict[str, Any], dict[str, Any]]:
         self.obs, terminated, truncated, info, rep = _step_latency_aware(self.env, raw, held, interval)
-        self._record(decision)
+        self._after(decision, info, rep)
         return terminated, truncated, dict(info), rep
+
+    def _after(self, decision: int, info: dict[str, Any], reply: Any) -> None:
+        self.tick = int(info.get("tick", self.tick))
+        if self.history is not None:
+            self.history.record_reply(decision, reply if isinstance(reply, dict) and reply else None)
+        self._record(decision)
 
     def _record(self, decision: int) -> None:
         if self.frames:
@@ -127,7 +167,7 @@ async def drive_vlm_scene(
         # decision cadence.
         config = config.replace(decision_interval_ticks=1)
     scene_dir = fresh_scene_dir(out, job, opts.frames)
-    args = (job.scenario, config, scene_dir, driver.payload, opts.frames, opts.video)
+    args = (job.scenario, config, scene_dir, driver.payload, opts.frames, opts.video, vopts.history)
     scene: VlmScene | None = None
     if worker is not None:
         from drivehierarchy.benchmark.r4.workers import make_remote
@@ -151,7 +191,11 @@ async def drive_vlm_scene(
                 stats.decisions += 1
                 n = stats.decisions
                 asked_tick = info.get("tick")
-                messages = await remote("messages", n, job.seed)
+                history_log: dict[str, Any] = {}
+                if vopts.history.enabled:
+                    messages, history_log = await remote("messages_logged", n, job.seed)
+                else:
+                    messages = await remote("messages", n, job.seed)
                 reply = await driver.request(messages)
                 stats.latency_s += reply.latency_s
                 held = 0
@@ -185,6 +229,7 @@ async def drive_vlm_scene(
                     "images": reply.images,
                     "held_ticks": held,
                     "applied": applied,
+                    **history_log,
                     **reply.log_fields(),
                 }
                 dlog.write(json.dumps(entry, sort_keys=True) + "\n")
@@ -231,9 +276,6 @@ async def drive_vlm_scene(
             # Aborted, or failed: the env (and its SUMO) goes now, whatever state it is in.
             with contextlib.suppress(Exception):
                 await remote("close")
-
-
-TICK_S: float = _core.constants()["tick_s"]  # the protocol's simulation step
 
 
 def _step_latency_aware(
