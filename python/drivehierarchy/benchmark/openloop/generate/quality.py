@@ -15,13 +15,61 @@ import random
 import re
 import string
 from collections import Counter
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TypeVar
+
+from drivehierarchy import DriveHierarchyError
 
 T = TypeVar("T")
 # At most this share of a count task's answers may be 0.
 MAX_ZERO_SHARE = 0.2
+
+
+# -- why candidates were dropped -------------------------------------------------------------------
+# While a task is built (`tracking`), its builder counts the candidates each rule removes
+# (`dropped`) and those that passed every rule (`passed`): a short or empty task then names the
+# rules that emptied it.
+_FUNNEL: Counter[str] | None = None
+PASSED = "passed every rule"
+
+
+def dropped(rule: str, k: int = 1) -> None:
+    """Counts `k` candidates removed by `rule` (a short phrase) of the task being built."""
+    if _FUNNEL is not None and k:
+        _FUNNEL[rule] += k
+
+
+def passed(k: int) -> None:
+    """Counts `k` candidates that passed every rule of the task being built (before balancing)."""
+    dropped(PASSED, k)
+
+
+@contextmanager
+def tracking() -> Iterator[Counter[str]]:
+    """Collects `dropped`/`passed` counts of the builder run inside it."""
+    global _FUNNEL
+    outer, _FUNNEL = _FUNNEL, Counter()
+    try:
+        yield _FUNNEL
+    finally:
+        _FUNNEL = outer
+
+
+def why_short(funnel: Mapping[str, int], asked: int, got: int) -> str:
+    """The message of a task that yields `got` < `asked` records: how many candidates passed
+    the rules and which rules removed the most."""
+    ok = int(funnel.get(PASSED, 0))
+    rules = sorted(((k, r) for r, k in funnel.items() if r != PASSED and k), key=lambda kr: (-kr[0], kr[1]))
+    removed = ", ".join(f"{r} ({k})" for k, r in rules[:4]) or "no candidate moment at all"
+    if ok == 0:
+        return f"{got} of {asked} records: no candidate passed the rules; removed by: {removed}"
+    return (
+        f"{got} of {asked} records: {ok} candidates passed the rules (removed by: {removed}), "
+        "and the balance and diversity rules (per-class balance, option share, 2 records per "
+        "image, one record per description) kept only these"
+    )
 
 
 def _dedup(items: Sequence[Any]) -> list[Any]:
@@ -72,7 +120,8 @@ def balance_groups(
         sizes = sorted(len(_dedup(v)) for v in groups.values())
         cap_total = n
         for total in range(n, 0, -1):
-            per = int(max_share * total + 1e-9)
+            # (One record of each option fits any share: a set of 1–2 records is never empty.)
+            per = max(1, int(max_share * total + 1e-9))
             if sum(min(sz, per) for sz in sizes) >= total:
                 cap_total = total
                 break
@@ -83,7 +132,7 @@ def balance_groups(
     for v in pools.values():
         rng.shuffle(v)
     out: list[T] = []
-    limit = int(max_share * n + 1e-9) if max_share is not None else n
+    limit = max(1, int(max_share * n + 1e-9)) if max_share is not None else n
     taken: Counter[Any] = Counter()
     while len(out) < n and any(pools.values()):
         for k in list(pools):
@@ -148,6 +197,14 @@ def balance_binary_by(groups: dict[str, tuple[list[T], list[T]]], n: int, rng: r
                 out += [a, b]
             elif a is not None:
                 y.clear()  # no partner left: the group is done
+    if n % 2 == 1 and len(out) == n - 1:
+        # An odd `n`: one more, yes or no (seeded), from the first group with one left.
+        for y, nn in pools.values():
+            first, second = (y, nn) if rng.random() < 0.5 else (nn, y)
+            item = _take(first, used) or _take(second, used)
+            if item is not None:
+                out.append(item)
+                break
     rng.shuffle(out)
     return out
 
@@ -191,8 +248,9 @@ def letter_options(recs: list[dict[str, Any]], rng: random.Random, answer_style:
 
 
 # -- checks ---------------------------------------------------------------------------------------
-class QualityError(ValueError):
-    """A generated record breaks a quality rule (names task, record and rule)."""
+class QualityError(DriveHierarchyError, ValueError):
+    """A generated record or set breaks a quality rule (names task, record and rule); the CLI
+    prints it and exits with status 2."""
 
 
 def _images(rec: dict[str, Any]) -> list[str]:
@@ -392,15 +450,22 @@ def _category(rec: dict[str, Any]) -> str:
 
 
 def quality_rows(
-    tasks: Mapping[str, Sequence[dict[str, Any]]], categories: dict[str, set[str]]
+    tasks: Mapping[str, Sequence[dict[str, Any]]],
+    categories: dict[str, set[str]],
+    asked: int | None = None,
+    funnels: Mapping[str, Mapping[str, int]] | None = None,
 ) -> list[dict[str, Any]]:
-    """One row per task: records, prior vs chance, balance and diversity, problems found."""
+    """One row per task: records, prior vs chance, balance and diversity, problems found (a
+    task with fewer than `asked` records is one, with the rules that removed its candidates
+    from `funnels`)."""
     rows = []
     for task, recs in tasks.items():
         p = prior_check(task, recs) if recs else {"prior": 0.0, "chance": 0.0, "scored": 0}
         d = diversity(task, recs)
         d["scenario_categories"] = len(categories.get(task, set()))
         problems = []
+        if asked is not None and len(recs) < asked:
+            problems.append(why_short((funnels or {}).get(task, {}), asked, len(recs)))
         if p["prior"] - p["chance"] > MAX_PRIOR_MARGIN:
             problems.append(
                 f"text-only prior {p['prior']:.1f} beats chance {p['chance']:.1f} "
