@@ -10,6 +10,7 @@ import math
 import random
 import subprocess
 import sys
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -113,6 +114,29 @@ def test_max_share_caps_one_answer() -> None:
     two = {k: groups[k] for k in ("straight", "turn")}
     out = quality.balance_groups(two, 100, random.Random(0), max_share=0.4)
     assert len(out) == 20
+
+
+def test_an_answer_two_classes_share_stays_within_the_task_share() -> None:
+    # R1_1_C: "moving" is an option for people and vehicles; standing still is rare.
+    by_class = {
+        "Pedestrian": {
+            "moving": [_rec(f"pm{i}", "qp", "moving") for i in range(60)],
+            "standing": [_rec(f"ps{i}", "qp", "standing") for i in range(40)],
+        },
+        "Vehicle": {
+            "moving": [_rec(f"vm{i}", "qv", "moving") for i in range(200)],
+            "parked": [_rec(f"vp{i}", "qv", "parked") for i in range(30)],
+            "stopped": [_rec(f"vs{i}", "qv", "stopped") for i in range(35)],
+        },
+    }
+    loose = quality.balance_within_classes(by_class, 200, random.Random(0), max_share=0.4)
+    assert sum(r[0]["answer"] == "moving" for r in loose) > 0.4 * len(loose)
+    out = quality.balance_within_classes(by_class, 200, random.Random(0), max_share=0.4, max_answer_share=0.4)
+    answers = Counter(r[0]["answer"] for r in out)
+    assert answers["moving"] <= 0.4 * len(out) and len(out) >= 150, answers
+    for q, k in (("qp", 2), ("qv", 3)):
+        mine = Counter(r[0]["answer"] for r in out if r[0]["question"] == q)
+        assert max(mine.values()) <= max(0.4, 1 / k) * sum(mine.values()) + 1e-9, mine
 
 
 def test_a_single_record_fits_any_share() -> None:

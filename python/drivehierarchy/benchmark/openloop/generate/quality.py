@@ -147,13 +147,69 @@ def balance_groups(
     return out
 
 
+def _allocate(
+    sizes: dict[str, dict[str, int]], total: int, share: float, overall: float
+) -> dict[tuple[str, str], int] | None:
+    """How many items of each (class, answer) make `total` items with no answer above `share`
+    of its class (or 1/k with k answers) and no answer text above `overall` of all (or 1/K with
+    K texts), within the sizes; None when no split of up to three classes is found."""
+    classes = sorted(sizes)
+    if not classes or len(classes) > 3:
+        return None
+    texts = {a for c in classes for a in sizes[c]}
+    g_cap = int(max(overall, 1.0 / len(texts)) * total + 1e-9)
+    avail = [sum(sizes[c].values()) for c in classes]
+
+    def splits(i: int, left: int) -> Iterator[list[int]]:
+        if i == len(classes) - 1:
+            if left <= avail[i]:
+                yield [left]
+            return
+        for x in range(min(left, avail[i]), -1, -1):
+            for rest in splits(i + 1, left - x):
+                yield [x, *rest]
+
+    for xs in splits(0, total):
+        used: Counter[str] = Counter()
+        counts: dict[tuple[str, str], int] = {}
+        ok = True
+        # Classes with fewer answers first: they have the least freedom.
+        for c, x in sorted(zip(classes, xs, strict=True), key=lambda cx: (len(sizes[cx[0]]), cx[0])):
+            if x == 0:
+                continue
+            cap = int(max(share, 1.0 / len(sizes[c])) * x + 1e-9)
+            take = dict.fromkeys(sizes[c], 0)
+            for _ in range(x):
+                # One more of the answer used least overall that still fits every cap.
+                fits = [a for a in sorted(sizes[c]) if take[a] < min(cap, sizes[c][a]) and used[a] < g_cap]
+                if not fits:
+                    ok = False
+                    break
+                a = min(fits, key=lambda a: (used[a], take[a], a))
+                take[a] += 1
+                used[a] += 1
+            if not ok:
+                break
+            counts.update({(c, a): k for a, k in take.items() if k})
+        if ok:
+            return counts
+    return None
+
+
 def balance_within_classes(
-    by_class: dict[str, dict[str, list[T]]], n: int, rng: random.Random, max_share: float = 0.4
+    by_class: dict[str, dict[str, list[T]]],
+    n: int,
+    rng: random.Random,
+    max_share: float = 0.4,
+    max_answer_share: float | None = None,
 ) -> list[T]:
     """Items balanced over the answers *within every asked class* (no answer above
     `max_share` of its class's items, or 1/k with k answers; a class with one answer only is
     left out: its question would give the answer away), then drawn round-robin over the classes
-    up to `n`."""
+    up to `n`. With `max_answer_share` an answer text the classes share ("moving") also stays
+    within that share of all the items (the most items for which such a split exists)."""
+    if max_answer_share is not None:
+        return _balance_shared_answers(by_class, n, rng, max_share, max_answer_share)
     used: Counter[str] = Counter()
     per_class = {}
     for cls in sorted(by_class):
@@ -169,6 +225,41 @@ def balance_within_classes(
                 out.append(per_class[cls].pop())
     rng.shuffle(out)
     return out
+
+
+def _balance_shared_answers(
+    by_class: dict[str, dict[str, list[T]]], n: int, rng: random.Random, share: float, overall: float
+) -> list[T]:
+    pools: dict[str, dict[str, list[T]]] = {}
+    for cls in sorted(by_class):
+        answers = {a: _dedup(v) for a, v in sorted(by_class[cls].items()) if v}
+        if len(answers) < 2:
+            continue
+        for v in answers.values():
+            rng.shuffle(v)
+        pools[cls] = answers
+    for total in range(n, 0, -1):
+        sizes = {c: {a: len(v) for a, v in ans.items()} for c, ans in pools.items()}
+        while True:
+            counts = _allocate(sizes, total, share, overall)
+            if counts is None:
+                break
+            # Draw them under the per-image cap; an answer that runs short is drawn again with
+            # the size it has left.
+            used: Counter[str] = Counter()
+            out: list[T] = []
+            short = False
+            for (c, a), k in sorted(counts.items()):
+                pool = list(pools[c][a])
+                got = [x for x in (_take(pool, used) for _ in range(k)) if x is not None]
+                out += got
+                if len(got) < k:
+                    sizes[c][a] = min(sizes[c][a] - 1, len(got))
+                    short = True
+            if not short:
+                rng.shuffle(out)
+                return out
+    return []
 
 
 def balance_binary(yes: list[T], no: list[T], n: int, rng: random.Random) -> list[T]:

@@ -265,7 +265,10 @@ def r1_1_c(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
             by_status.setdefault(cat, {}).setdefault(status, []).append((rec, [f]))
     quality.passed(sum(len(v) for d in by_status.values() for v in d.values()))
     # Balanced within each asked class: the class must not give the status away.
-    chosen = quality.balance_within_classes(by_status, n, rng, max_share=quality.MAX_OPTION_SHARE)
+    # "moving" is an option of both classes: it also stays within the task-wide option share.
+    chosen = quality.balance_within_classes(
+        by_status, n, rng, max_share=quality.MAX_OPTION_SHARE, max_answer_share=quality.MAX_OPTION_SHARE
+    )
     recs = [c[0] for c in chosen]
     quality.letter_options(recs, rng, answer_style="letter")
     return _finish(recs, "R1_1_C", [c[1] for c in chosen])
@@ -423,10 +426,11 @@ def _motion_phrase(m: Moment, f: Frame, v: Visible) -> str | None:
     if a.speed_mps < CLEARLY_MOVING_MPS:
         return None
     rel = (a.yaw - m.ego.yaw + math.pi) % (2 * math.pi) - math.pi
+    verb = "riding" if a.category == "Bicycle" else "driving"
     if abs(rel) < math.pi / 4:
-        return "driving in the same direction as the ego car"
+        return f"{verb} in the same direction as the ego car"
     if abs(rel) > 3 * math.pi / 4:
-        return "driving toward the ego car"
+        return f"{verb} toward the ego car"
     return "crossing from left to right" if rel < 0 else "crossing from right to left"
 
 
