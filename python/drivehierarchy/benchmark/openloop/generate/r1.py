@@ -192,6 +192,11 @@ def _nearest(f: Frame, cat: str) -> Visible | None:
 # follows the world speed: clear of the pose's threshold on either side.
 REAR_VIEW_DEG = 60.0
 LAMP_BOX_PX = 40
+# ... and only within LAMP_MAX_M (farther, a lamp is a few pixels: a car 65 m away seen half
+# from the side gave "moving" in a spot check) on a vehicle at least LAMP_WHOLE shown (a back
+# cut by the image border may have lost its lamps).
+LAMP_MAX_M = 40.0
+LAMP_WHOLE = 0.9
 CLEARLY_MOVING_MPS = 2.0
 STILL_MPS = 0.05
 PED_WALKING_MPS = 0.5
@@ -216,7 +221,12 @@ def frame_status(m: Moment, f: Frame, v: Visible) -> str | None:
     # Lamps are at the rear: seen when the camera looks at the vehicle's back.
     sight = math.atan2(a.y - m.ego.y, a.x - m.ego.x)
     rel = abs((a.yaw - sight + math.pi) % (2 * math.pi) - math.pi)
-    if math.degrees(rel) > REAR_VIEW_DEG or bw < LAMP_BOX_PX:
+    if (
+        math.degrees(rel) > REAR_VIEW_DEG
+        or bw < LAMP_BOX_PX
+        or v.distance_m > LAMP_MAX_M
+        or v.visible_fraction < LAMP_WHOLE
+    ):
         return None
     if a.braking and a.speed_mps <= STILL_MPS:
         return "stopped"
