@@ -157,7 +157,8 @@ def _allocate(
     if not classes or len(classes) > 3:
         return None
     texts = {a for c in classes for a in sizes[c]}
-    g_cap = int(max(overall, 1.0 / len(texts)) * total + 1e-9)
+    # (As in `balance_groups`, one item of an answer fits any share: small sets stay non-empty.)
+    g_cap = max(1, int(max(overall, 1.0 / len(texts)) * total + 1e-9))
     avail = [sum(sizes[c].values()) for c in classes]
 
     def splits(i: int, left: int) -> Iterator[list[int]]:
@@ -177,7 +178,7 @@ def _allocate(
         for c, x in sorted(zip(classes, xs, strict=True), key=lambda cx: (len(sizes[cx[0]]), cx[0])):
             if x == 0:
                 continue
-            cap = int(max(share, 1.0 / len(sizes[c])) * x + 1e-9)
+            cap = max(1, int(max(share, 1.0 / len(sizes[c])) * x + 1e-9))
             take = dict.fromkeys(sizes[c], 0)
             for _ in range(x):
                 # One more of the answer used least overall that still fits every cap.
