@@ -64,7 +64,7 @@ const fn hue_any_dark() -> ColourRange {
 pub const ACTOR_CYCLE: [usize; 8] = [5, 9, 1, 0, 7, 8, 10, 3];
 
 /// The `i`-th default actor colour (see [`ACTOR_CYCLE`]).
-pub fn cycle_colour(i: usize) -> [u8; 3] {
+pub const fn cycle_colour(i: usize) -> [u8; 3] {
     PALETTE[ACTOR_CYCLE[i % ACTOR_CYCLE.len()]].rgb
 }
 

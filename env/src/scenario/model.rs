@@ -10,17 +10,19 @@ use std::sync::Arc;
 
 /// Protocol fallback speed for the reference duration when a scenario gives none (docs/protocol.md#r4-scene-score).
 pub const DEFAULT_REFERENCE_SPEED_MPS: f64 = 5.56;
-/// Fixed palette; actor `i` (file order, obstacles after actors) gets `PALETTE[i % 8]`.
-pub const PALETTE: [[u8; 3]; 8] = [
-    [200, 40, 40],
-    [40, 90, 200],
-    [230, 230, 230],
-    [40, 40, 40],
-    [220, 180, 30],
-    [40, 150, 70],
-    [140, 60, 160],
-    [150, 150, 150],
-];
+/// Default body colours: actor `i` (file order, obstacles after actors) and native traffic
+/// vehicle `key` get `PALETTE[i % 8]`, the renderer's named actor colours
+/// ([`crate::render::palette::cycle_colour`]), so every default actor renders as a colour with
+/// one clear name (docs/rendering.md#colour-names).
+pub const PALETTE: [[u8; 3]; 8] = {
+    let mut out = [[0u8; 3]; 8];
+    let mut i = 0;
+    while i < out.len() {
+        out[i] = crate::render::palette::cycle_colour(i);
+        i += 1;
+    }
+    out
+};
 /// Ego body colour unless the scenario sets one.
 pub const EGO_COLOR: [u8; 3] = [30, 110, 230];
 
@@ -333,4 +335,26 @@ fn travel_s(p: &ScriptedPath, upto: f64) -> f64 {
 
 fn hold_s(p: &ScriptedPath) -> f64 {
     p.brake.and_then(|b| b.hold_s).unwrap_or(0.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::PALETTE;
+    use crate::render::palette::{name_of, PALETTE as NAMED};
+
+    /// Every default actor colour is one of the renderer's named colours, and the eight differ
+    /// by name (neighbours in file order are told apart by their colour word).
+    #[test]
+    fn default_actor_colours_are_named_palette_colours() {
+        let mut names = Vec::new();
+        for rgb in PALETTE {
+            let entry = NAMED.iter().find(|c| c.rgb == rgb);
+            assert!(entry.is_some(), "{rgb:?} is no palette entry");
+            assert_eq!(name_of(rgb), entry.unwrap().name);
+            names.push(name_of(rgb));
+        }
+        names.sort_unstable();
+        names.dedup();
+        assert_eq!(names.len(), PALETTE.len(), "{names:?}");
+    }
 }

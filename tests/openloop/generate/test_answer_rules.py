@@ -1,7 +1,7 @@
 """The rules that decide what a generated question may say, on hand-made inputs (issue 33):
-R1_4's action from the frames shown (a sustained turn, not a weave), colour words from rendered
-pixels, R2_3's reference heading, the per-class yes/no balance, the per-image cap, the text-only
-prior check and the review sheet's verdict file."""
+R1_4's action from the frames shown (a sustained turn, not a weave), colour words from the
+renderer's palette names, R2_3's reference heading, the per-class yes/no balance, the per-image
+cap, the text-only prior check and the review sheet's verdict file."""
 
 from __future__ import annotations
 
@@ -10,13 +10,15 @@ import math
 import random
 import subprocess
 import sys
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
 import pytest
 
+from drivehierarchy import _core
 from drivehierarchy.benchmark.openloop.generate import quality, r1
-from drivehierarchy.benchmark.openloop.generate.rollout import pixel_colour_name
+from drivehierarchy.benchmark.openloop.generate.rollout import colour_name, shown_colour
 
 REPO = Path(__file__).resolve().parents[3]
 
@@ -45,24 +47,27 @@ def test_speed_action_uses_the_frames_shown_only() -> None:
 
 
 # -- colour words ---------------------------------------------------------------------------------
+def test_colour_words_use_the_renderers_one_mapping() -> None:
+    # Every palette entry is named by the renderer's mapping (render::palette::name_of).
+    for entry in _core.colour_palette():
+        assert colour_name(tuple(entry["rgb"])) == entry["name"]
+    # Colours outside the palette get the name of the range they fall in.
+    assert colour_name((230, 230, 230)) == "white"
+    assert colour_name((150, 150, 150)) == "silver"
+
+
 @pytest.mark.parametrize(
-    ("rgb", "name"),
+    ("painted", "seen", "word"),
     [
-        ((230, 230, 232), "white"),
-        ((120, 122, 128), "gray"),
-        ((20, 20, 22), "black"),
-        ((190, 30, 30), "red"),
-        ((30, 60, 190), "blue"),
-        ((40, 150, 50), "green"),
-        ((230, 200, 40), "yellow"),
-        ((240, 130, 30), "orange"),
-        ((110, 70, 35), "brown"),
-        ((170, 171, 174), ""),  # between gray and white: no word
-        ((70, 25, 25), ""),  # dark red or brown
+        ("red", "red", "red"),
+        ("white", "white", "white"),
+        ("white", "silver", ""),  # shaded or near a boundary: either word fits
+        ("gray", None, ""),  # no body paint visible
+        ("brown", "red", ""),
     ],
 )
-def test_colour_names_follow_the_rendered_pixels(rgb: tuple[int, int, int], name: str) -> None:
-    assert pixel_colour_name(rgb) == name
+def test_a_colour_word_is_the_name_the_renderer_drew(painted: str, seen: str | None, word: str) -> None:
+    assert shown_colour(painted, seen) == word
 
 
 # -- balancing ------------------------------------------------------------------------------------
@@ -109,6 +114,58 @@ def test_max_share_caps_one_answer() -> None:
     two = {k: groups[k] for k in ("straight", "turn")}
     out = quality.balance_groups(two, 100, random.Random(0), max_share=0.4)
     assert len(out) == 20
+
+
+def test_an_answer_two_classes_share_stays_within_the_task_share() -> None:
+    # R1_1_C: "moving" is an option for people and vehicles; standing still is rare.
+    by_class = {
+        "Pedestrian": {
+            "moving": [_rec(f"pm{i}", "qp", "moving") for i in range(60)],
+            "standing": [_rec(f"ps{i}", "qp", "standing") for i in range(40)],
+        },
+        "Vehicle": {
+            "moving": [_rec(f"vm{i}", "qv", "moving") for i in range(200)],
+            "parked": [_rec(f"vp{i}", "qv", "parked") for i in range(30)],
+            "stopped": [_rec(f"vs{i}", "qv", "stopped") for i in range(35)],
+        },
+    }
+    loose = quality.balance_within_classes(by_class, 200, random.Random(0), max_share=0.4)
+    assert sum(r[0]["answer"] == "moving" for r in loose) > 0.4 * len(loose)
+    out = quality.balance_within_classes(by_class, 200, random.Random(0), max_share=0.4, max_answer_share=0.4)
+    answers = Counter(r[0]["answer"] for r in out)
+    assert answers["moving"] <= 0.4 * len(out) and len(out) >= 150, answers
+    for q, k in (("qp", 2), ("qv", 3)):
+        mine = Counter(r[0]["answer"] for r in out if r[0]["question"] == q)
+        assert max(mine.values()) <= max(0.4, 1 / k) * sum(mine.values()) + 1e-9, mine
+
+
+def test_a_single_record_fits_any_share() -> None:
+    # --per-task 1 (or 2) must still give records: one of each option is within any share.
+    groups = {"moving": [_rec("m.jpg", "q", "m")], "stopped": [_rec("s.jpg", "q", "s")]}
+    assert len(quality.balance_groups(groups, 1, random.Random(0), max_share=0.4)) == 1
+    assert len(quality.balance_groups(groups, 2, random.Random(0), max_share=0.4)) == 2
+    yes, no = [_rec("y.jpg", "q", "Yes")], [_rec("n.jpg", "q", "No")]
+    assert len(quality.balance_binary(yes, no, 1, random.Random(0))) == 1
+
+
+# -- short and empty tasks ------------------------------------------------------------------------
+def test_a_short_task_is_a_problem_that_names_the_rules() -> None:
+    recs = [_existence(i, "Vehicle", i % 2 == 0) for i in range(4)]
+    with quality.tracking() as funnel:
+        quality.dropped("an object of the class in the dead band", 7)
+        quality.dropped("no clearly nearest object", 3)
+        quality.passed(4)
+    (row,) = quality.quality_rows({"R1_1_A": recs}, {}, asked=10, funnels={"R1_1_A": funnel})
+    (problem,) = row["problems"]
+    assert problem.startswith("4 of 10 records: 4 candidates passed the rules")
+    assert "an object of the class in the dead band (7), no clearly nearest object (3)" in problem
+    assert not quality.format_table([row]).splitlines()[1].endswith("ok")
+    (full,) = quality.quality_rows({"R1_1_A": recs}, {}, asked=4, funnels={"R1_1_A": funnel})
+    assert full["problems"] == []
+    (empty,) = quality.quality_rows({"R1_1_A": []}, {}, asked=1, funnels={"R1_1_A": {"no cue": 5}})
+    assert empty["problems"] == ["0 of 1 records: no candidate passed the rules; removed by: no cue (5)"]
+    # Outside a builder run nothing is counted.
+    quality.dropped("ignored")
 
 
 # -- the text-only prior --------------------------------------------------------------------------

@@ -257,3 +257,30 @@ def test_train_split_plays_shifted_starts_reproducibly(tmp_path: Path) -> None:
 
     text = shifted_scenario(first, 5.0)
     assert text != first.read_text(encoding="utf-8") and "[ego]" in text
+
+
+def test_an_empty_task_fails_with_the_rules_that_emptied_it(tmp_path: Path, monkeypatch, capsys) -> None:
+    from drivehierarchy.benchmark.openloop.generate import rollout
+    from drivehierarchy.cli import main
+
+    def nothing(moments, n, rng):  # every candidate removed by one rule
+        quality.dropped("the frame shows no cue of the status", len(moments))
+        return []
+
+    monkeypatch.setitem(rollout._REGISTRY, "R1_1_C", (nothing, rollout.Needs()))
+    one = sorted((SUITE / "02_obstacles").glob("*.toml"))[0]
+    out = tmp_path / "set"
+    args = ["openloop", "generate", "--suite", str(one), "--out", str(out), "--per-task", "1"]
+    rc = main([*args, "--tasks", "R1_1_A,R1_1_C", "--jobs", "1", "--no-progress"])
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert "R1_1_C: 0 of 1 records: no candidate passed the rules" in err
+    assert "the frame shows no cue of the status" in err
+    assert "R1_1_A: " not in err  # a full task is not named
+    summary = json.loads((out / "generation.json").read_text(encoding="utf-8"))
+    assert summary["tasks"]["R1_1_C"]["records"] == 0
+    assert summary["tasks"]["R1_1_A"]["records"] == 1
+    assert summary["tasks"]["R1_1_C"]["candidates"]["the frame shows no cue of the status"] > 0
+    # A timing run (strict=False) reports it in the table instead.
+    again = generate(one, out, per_task=1, seed=0, tasks=["R1_1_C"], jobs=1, strict=False)
+    assert again["quality"][0]["problems"][0].startswith("0 of 1 records")

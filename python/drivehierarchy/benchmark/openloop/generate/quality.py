@@ -15,13 +15,61 @@ import random
 import re
 import string
 from collections import Counter
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TypeVar
+
+from drivehierarchy import DriveHierarchyError
 
 T = TypeVar("T")
 # At most this share of a count task's answers may be 0.
 MAX_ZERO_SHARE = 0.2
+
+
+# -- why candidates were dropped -------------------------------------------------------------------
+# While a task is built (`tracking`), its builder counts the candidates each rule removes
+# (`dropped`) and those that passed every rule (`passed`): a short or empty task then names the
+# rules that emptied it.
+_FUNNEL: Counter[str] | None = None
+PASSED = "passed every rule"
+
+
+def dropped(rule: str, k: int = 1) -> None:
+    """Counts `k` candidates removed by `rule` (a short phrase) of the task being built."""
+    if _FUNNEL is not None and k:
+        _FUNNEL[rule] += k
+
+
+def passed(k: int) -> None:
+    """Counts `k` candidates that passed every rule of the task being built (before balancing)."""
+    dropped(PASSED, k)
+
+
+@contextmanager
+def tracking() -> Iterator[Counter[str]]:
+    """Collects `dropped`/`passed` counts of the builder run inside it."""
+    global _FUNNEL
+    outer, _FUNNEL = _FUNNEL, Counter()
+    try:
+        yield _FUNNEL
+    finally:
+        _FUNNEL = outer
+
+
+def why_short(funnel: Mapping[str, int], asked: int, got: int) -> str:
+    """The message of a task that yields `got` < `asked` records: how many candidates passed
+    the rules and which rules removed the most."""
+    ok = int(funnel.get(PASSED, 0))
+    rules = sorted(((k, r) for r, k in funnel.items() if r != PASSED and k), key=lambda kr: (-kr[0], kr[1]))
+    removed = ", ".join(f"{r} ({k})" for k, r in rules[:4]) or "no candidate moment at all"
+    if ok == 0:
+        return f"{got} of {asked} records: no candidate passed the rules; removed by: {removed}"
+    return (
+        f"{got} of {asked} records: {ok} candidates passed the rules (removed by: {removed}), "
+        "and the balance and diversity rules (per-class balance, option share, 2 records per "
+        "image, one record per description) kept only these"
+    )
 
 
 def _dedup(items: Sequence[Any]) -> list[Any]:
@@ -72,7 +120,8 @@ def balance_groups(
         sizes = sorted(len(_dedup(v)) for v in groups.values())
         cap_total = n
         for total in range(n, 0, -1):
-            per = int(max_share * total + 1e-9)
+            # (One record of each option fits any share: a set of 1–2 records is never empty.)
+            per = max(1, int(max_share * total + 1e-9))
             if sum(min(sz, per) for sz in sizes) >= total:
                 cap_total = total
                 break
@@ -83,7 +132,7 @@ def balance_groups(
     for v in pools.values():
         rng.shuffle(v)
     out: list[T] = []
-    limit = int(max_share * n + 1e-9) if max_share is not None else n
+    limit = max(1, int(max_share * n + 1e-9)) if max_share is not None else n
     taken: Counter[Any] = Counter()
     while len(out) < n and any(pools.values()):
         for k in list(pools):
@@ -98,13 +147,70 @@ def balance_groups(
     return out
 
 
+def _allocate(
+    sizes: dict[str, dict[str, int]], total: int, share: float, overall: float
+) -> dict[tuple[str, str], int] | None:
+    """How many items of each (class, answer) make `total` items with no answer above `share`
+    of its class (or 1/k with k answers) and no answer text above `overall` of all (or 1/K with
+    K texts), within the sizes; None when no split of up to three classes is found."""
+    classes = sorted(sizes)
+    if not classes or len(classes) > 3:
+        return None
+    texts = {a for c in classes for a in sizes[c]}
+    # (As in `balance_groups`, one item of an answer fits any share: small sets stay non-empty.)
+    g_cap = max(1, int(max(overall, 1.0 / len(texts)) * total + 1e-9))
+    avail = [sum(sizes[c].values()) for c in classes]
+
+    def splits(i: int, left: int) -> Iterator[list[int]]:
+        if i == len(classes) - 1:
+            if left <= avail[i]:
+                yield [left]
+            return
+        for x in range(min(left, avail[i]), -1, -1):
+            for rest in splits(i + 1, left - x):
+                yield [x, *rest]
+
+    for xs in splits(0, total):
+        used: Counter[str] = Counter()
+        counts: dict[tuple[str, str], int] = {}
+        ok = True
+        # Classes with fewer answers first: they have the least freedom.
+        for c, x in sorted(zip(classes, xs, strict=True), key=lambda cx: (len(sizes[cx[0]]), cx[0])):
+            if x == 0:
+                continue
+            cap = max(1, int(max(share, 1.0 / len(sizes[c])) * x + 1e-9))
+            take = dict.fromkeys(sizes[c], 0)
+            for _ in range(x):
+                # One more of the answer used least overall that still fits every cap.
+                fits = [a for a in sorted(sizes[c]) if take[a] < min(cap, sizes[c][a]) and used[a] < g_cap]
+                if not fits:
+                    ok = False
+                    break
+                a = min(fits, key=lambda a: (used[a], take[a], a))
+                take[a] += 1
+                used[a] += 1
+            if not ok:
+                break
+            counts.update({(c, a): k for a, k in take.items() if k})
+        if ok:
+            return counts
+    return None
+
+
 def balance_within_classes(
-    by_class: dict[str, dict[str, list[T]]], n: int, rng: random.Random, max_share: float = 0.4
+    by_class: dict[str, dict[str, list[T]]],
+    n: int,
+    rng: random.Random,
+    max_share: float = 0.4,
+    max_answer_share: float | None = None,
 ) -> list[T]:
     """Items balanced over the answers *within every asked class* (no answer above
     `max_share` of its class's items, or 1/k with k answers; a class with one answer only is
     left out: its question would give the answer away), then drawn round-robin over the classes
-    up to `n`."""
+    up to `n`. With `max_answer_share` an answer text the classes share ("moving") also stays
+    within that share of all the items (the most items for which such a split exists)."""
+    if max_answer_share is not None:
+        return _balance_shared_answers(by_class, n, rng, max_share, max_answer_share)
     used: Counter[str] = Counter()
     per_class = {}
     for cls in sorted(by_class):
@@ -120,6 +226,41 @@ def balance_within_classes(
                 out.append(per_class[cls].pop())
     rng.shuffle(out)
     return out
+
+
+def _balance_shared_answers(
+    by_class: dict[str, dict[str, list[T]]], n: int, rng: random.Random, share: float, overall: float
+) -> list[T]:
+    pools: dict[str, dict[str, list[T]]] = {}
+    for cls in sorted(by_class):
+        answers = {a: _dedup(v) for a, v in sorted(by_class[cls].items()) if v}
+        if len(answers) < 2:
+            continue
+        for v in answers.values():
+            rng.shuffle(v)
+        pools[cls] = answers
+    for total in range(n, 0, -1):
+        sizes = {c: {a: len(v) for a, v in ans.items()} for c, ans in pools.items()}
+        while True:
+            counts = _allocate(sizes, total, share, overall)
+            if counts is None:
+                break
+            # Draw them under the per-image cap; an answer that runs short is drawn again with
+            # the size it has left.
+            used: Counter[str] = Counter()
+            out: list[T] = []
+            short = False
+            for (c, a), k in sorted(counts.items()):
+                pool = list(pools[c][a])
+                got = [x for x in (_take(pool, used) for _ in range(k)) if x is not None]
+                out += got
+                if len(got) < k:
+                    sizes[c][a] = min(sizes[c][a] - 1, len(got))
+                    short = True
+            if not short:
+                rng.shuffle(out)
+                return out
+    return []
 
 
 def balance_binary(yes: list[T], no: list[T], n: int, rng: random.Random) -> list[T]:
@@ -148,6 +289,14 @@ def balance_binary_by(groups: dict[str, tuple[list[T], list[T]]], n: int, rng: r
                 out += [a, b]
             elif a is not None:
                 y.clear()  # no partner left: the group is done
+    if n % 2 == 1 and len(out) == n - 1:
+        # An odd `n`: one more, yes or no (seeded), from the first group with one left.
+        for y, nn in pools.values():
+            first, second = (y, nn) if rng.random() < 0.5 else (nn, y)
+            item = _take(first, used) or _take(second, used)
+            if item is not None:
+                out.append(item)
+                break
     rng.shuffle(out)
     return out
 
@@ -191,8 +340,9 @@ def letter_options(recs: list[dict[str, Any]], rng: random.Random, answer_style:
 
 
 # -- checks ---------------------------------------------------------------------------------------
-class QualityError(ValueError):
-    """A generated record breaks a quality rule (names task, record and rule)."""
+class QualityError(DriveHierarchyError, ValueError):
+    """A generated record or set breaks a quality rule (names task, record and rule); the CLI
+    prints it and exits with status 2."""
 
 
 def _images(rec: dict[str, Any]) -> list[str]:
@@ -392,15 +542,22 @@ def _category(rec: dict[str, Any]) -> str:
 
 
 def quality_rows(
-    tasks: Mapping[str, Sequence[dict[str, Any]]], categories: dict[str, set[str]]
+    tasks: Mapping[str, Sequence[dict[str, Any]]],
+    categories: dict[str, set[str]],
+    asked: int | None = None,
+    funnels: Mapping[str, Mapping[str, int]] | None = None,
 ) -> list[dict[str, Any]]:
-    """One row per task: records, prior vs chance, balance and diversity, problems found."""
+    """One row per task: records, prior vs chance, balance and diversity, problems found (a
+    task with fewer than `asked` records is one, with the rules that removed its candidates
+    from `funnels`)."""
     rows = []
     for task, recs in tasks.items():
         p = prior_check(task, recs) if recs else {"prior": 0.0, "chance": 0.0, "scored": 0}
         d = diversity(task, recs)
         d["scenario_categories"] = len(categories.get(task, set()))
         problems = []
+        if asked is not None and len(recs) < asked:
+            problems.append(why_short((funnels or {}).get(task, {}), asked, len(recs)))
         if p["prior"] - p["chance"] > MAX_PRIOR_MARGIN:
             problems.append(
                 f"text-only prior {p['prior']:.1f} beats chance {p['chance']:.1f} "

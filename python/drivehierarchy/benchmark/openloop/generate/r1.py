@@ -80,6 +80,7 @@ def _front_frames(moments: Sequence[Moment]) -> list[tuple[Moment, Frame]]:
         f = m.frame(FRONT)
         if f is not None and f.size == IMAGE_SIZE:
             out.append((m, f))
+    quality.dropped("moment without a CAM_FRONT frame", len(moments) - len(out))
     return out
 
 
@@ -103,6 +104,7 @@ def r1_1_a(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
     for m, f in _front_frames(moments):
         for cat in CATEGORIES:
             if not _clear(f, cat):
+                quality.dropped("an object of the class in the dead band")
                 continue
             vis = f.visible_of(cat)
             rec = _order(
@@ -122,6 +124,7 @@ def r1_1_a(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
                 }
             )
             groups[cat][0 if vis else 1].append((rec, [f]))
+    quality.passed(sum(len(y) + len(no) for y, no in groups.values()))
     # Half yes and half no within every asked class: the class says nothing about the answer.
     chosen = quality.balance_binary_by(groups, n, rng)
     return _finish([c[0] for c in chosen], "R1_1_A", [c[1] for c in chosen])
@@ -133,6 +136,7 @@ def r1_1_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
     for m, f in _front_frames(moments):
         for cat in CATEGORIES:
             if not _clear(f, cat):
+                quality.dropped("an object of the class in the dead band")
                 continue
             vis = f.visible_of(cat)
             rec = _order(
@@ -152,6 +156,7 @@ def r1_1_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
                 }
             )
             by_count.setdefault((cat, len(vis)), []).append((rec, [f]))
+    quality.passed(sum(len(v) for v in by_count.values()))
     # Round-robin over (class, count): counts over several classes, no class or count dominant.
     chosen = quality.balance_counts(by_count, n, rng)
     return _finish([c[0] for c in chosen], "R1_1_B", [c[1] for c in chosen])
@@ -187,6 +192,11 @@ def _nearest(f: Frame, cat: str) -> Visible | None:
 # follows the world speed: clear of the pose's threshold on either side.
 REAR_VIEW_DEG = 60.0
 LAMP_BOX_PX = 40
+# ... and only within LAMP_MAX_M (farther, a lamp is a few pixels: a car 65 m away seen half
+# from the side gave "moving" in a spot check) on a vehicle at least LAMP_WHOLE shown (a back
+# cut by the image border may have lost its lamps).
+LAMP_MAX_M = 40.0
+LAMP_WHOLE = 0.9
 CLEARLY_MOVING_MPS = 2.0
 STILL_MPS = 0.05
 PED_WALKING_MPS = 0.5
@@ -211,7 +221,12 @@ def frame_status(m: Moment, f: Frame, v: Visible) -> str | None:
     # Lamps are at the rear: seen when the camera looks at the vehicle's back.
     sight = math.atan2(a.y - m.ego.y, a.x - m.ego.x)
     rel = abs((a.yaw - sight + math.pi) % (2 * math.pi) - math.pi)
-    if math.degrees(rel) > REAR_VIEW_DEG or bw < LAMP_BOX_PX:
+    if (
+        math.degrees(rel) > REAR_VIEW_DEG
+        or bw < LAMP_BOX_PX
+        or v.distance_m > LAMP_MAX_M
+        or v.visible_fraction < LAMP_WHOLE
+    ):
         return None
     if a.braking and a.speed_mps <= STILL_MPS:
         return "stopped"
@@ -227,9 +242,11 @@ def r1_1_c(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
         for cat, vocab in STATUS_OPTIONS.items():
             v = _nearest(f, cat)
             if v is None or v.distance_m > MAX_TARGET_M:
+                quality.dropped("no clearly nearest object of the class within 80 m")
                 continue
             status = frame_status(m, f, v)
             if status is None or status not in vocab:
+                quality.dropped("the frame shows no cue of the status (lamps, kerb, gait)")
                 continue
             rec = _order(
                 {
@@ -256,8 +273,12 @@ def r1_1_c(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
                 }
             )
             by_status.setdefault(cat, {}).setdefault(status, []).append((rec, [f]))
+    quality.passed(sum(len(v) for d in by_status.values() for v in d.values()))
     # Balanced within each asked class: the class must not give the status away.
-    chosen = quality.balance_within_classes(by_status, n, rng, max_share=quality.MAX_OPTION_SHARE)
+    # "moving" is an option of both classes: it also stays within the task-wide option share.
+    chosen = quality.balance_within_classes(
+        by_status, n, rng, max_share=quality.MAX_OPTION_SHARE, max_answer_share=quality.MAX_OPTION_SHARE
+    )
     recs = [c[0] for c in chosen]
     quality.letter_options(recs, rng, answer_style="letter")
     return _finish(recs, "R1_1_C", [c[1] for c in chosen])
@@ -286,6 +307,7 @@ def r1_2_a(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
         for cat in CATEGORIES:
             v = _nearest(f, cat)
             if v is None:
+                quality.dropped("no clearly nearest object of the class")
                 continue
             rec = _order(
                 {
@@ -304,6 +326,7 @@ def r1_2_a(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
                 }
             )
             groups.setdefault(cat, []).append((rec, [f]))
+    quality.passed(sum(len(v) for v in groups.values()))
     chosen = quality.balance_groups(groups, n, rng)
     return _finish([c[0] for c in chosen], "R1_2_A", [c[1] for c in chosen])
 
@@ -325,6 +348,7 @@ def r1_2_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
     for m, f in _front_frames(moments):
         for v in f.visible:
             if v.actor.category not in CATEGORIES or v.distance_m > MAX_TARGET_M or not _point_target(f, v):
+                quality.dropped("object not of an asked class, over 80 m or its centre in another box")
                 continue
             u, w = v.center_px
             rec = _order(
@@ -344,6 +368,7 @@ def r1_2_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
                 }
             )
             groups.setdefault(v.actor.category, []).append((rec, [f]))
+    quality.passed(sum(len(v) for v in groups.values()))
     chosen = quality.balance_groups(groups, n, rng)
     return _finish([c[0] for c in chosen], "R1_2_B", [c[1] for c in chosen])
 
@@ -354,10 +379,12 @@ def r1_2_c(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
     for m, f in _front_frames(moments):
         for cat in CATEGORIES:
             if not _clear(f, cat):
+                quality.dropped("an object of the class in the dead band")
                 continue
             vis = f.visible_of(cat)
             edges = [lo for _, _, lo, _ in BUCKETS[1:]]
             if any(abs(v.distance_m - e) < BUCKET_MARGIN_M for v in vis for e in edges):
+                quality.dropped("an object within 1.5 m of a bucket edge")
                 continue
             for name, label, lo, hi in BUCKETS:
                 inside = [v for v in vis if lo <= v.distance_m < hi]
@@ -382,6 +409,7 @@ def r1_2_c(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
                     }
                 )
                 by_count.setdefault(len(inside), []).append((rec, [f]))
+    quality.passed(sum(len(v) for v in by_count.values()))
     chosen = quality.balance_counts(by_count, n, rng)
     return _finish([c[0] for c in chosen], "R1_2_C", [c[1] for c in chosen])
 
@@ -408,10 +436,11 @@ def _motion_phrase(m: Moment, f: Frame, v: Visible) -> str | None:
     if a.speed_mps < CLEARLY_MOVING_MPS:
         return None
     rel = (a.yaw - m.ego.yaw + math.pi) % (2 * math.pi) - math.pi
+    verb = "riding" if a.category == "Bicycle" else "driving"
     if abs(rel) < math.pi / 4:
-        return "driving in the same direction as the ego car"
+        return f"{verb} in the same direction as the ego car"
     if abs(rel) > 3 * math.pi / 4:
-        return "driving toward the ego car"
+        return f"{verb} toward the ego car"
     return "crossing from left to right" if rel < 0 else "crossing from right to left"
 
 
@@ -431,10 +460,26 @@ def describe(m: Moment, f: Frame, v: Visible) -> str | None:
     motion = _motion_phrase(m, f, v)
     if motion is None:
         return None
-    colour = "" if v.actor.category == "Pedestrian" or not v.colour else f"{v.colour} "
+    person = v.actor.category in ("Pedestrian", "Bicycle")
+    # A person's colour is their shirt's (a cyclist's bicycle has the same paint).
+    colour = f"{v.colour} " if v.colour and not person else ""
     words = f"{colour}{_noun_r13(v)}"
-    where = f"{_region(f, v)} of the image, ahead of the ego car"
+    if person and v.colour:
+        words += f" wearing a {v.colour} shirt"
+    where = f"{_region(f, v)} of the image, {_how_far(v)}ahead of the ego car"
     return f"There is {_article(words)} {words} {motion}, {where}."
+
+
+# R1_3's distance words: "close ahead" up to CLOSE_M, "far ahead" from FAR_M, none between. Another
+# object fits "close" below SAME_RANGE_M and "far" above it (more than twice as near or far as
+# the target: its size in the image tells the two apart).
+CLOSE_M = 12.0
+FAR_M = 40.0
+SAME_RANGE_M = 25.0
+
+
+def _how_far(v: Visible) -> str:
+    return "close " if v.distance_m <= CLOSE_M else ("far " if v.distance_m >= FAR_M else "")
 
 
 def _could_be(m: Moment, f: Frame, target: Visible, other: Visible) -> bool:
@@ -443,6 +488,11 @@ def _could_be(m: Moment, f: Frame, target: Visible, other: Visible) -> bool:
     if _noun_r13(other) != _noun_r13(target) or _region(f, other) != _region(f, target):
         return False
     if target.colour and other.colour and target.colour != other.colour:
+        return False
+    word = _how_far(target)
+    if (word == "close " and other.distance_m >= SAME_RANGE_M) or (
+        word == "far " and other.distance_m <= SAME_RANGE_M
+    ):
         return False
     mo = _motion_phrase(m, f, other)
     return mo is None or mo == _motion_phrase(m, f, target)
@@ -457,6 +507,7 @@ def r1_3(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str
                 continue
             d = describe(m, f, v)
             if d is None:
+                quality.dropped("the frame shows nothing clear of the object's motion")
                 continue
             # The description must single the object out among everything shown, and the box
             # (the whole silhouette) must be mostly unoccluded.
@@ -468,6 +519,7 @@ def r1_3(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str
                 or any(o is not v and _could_be(m, f, v, o) for o in f.visible)
                 or f.blocking(("Vehicle", "Pedestrian", "Bicycle", "Motorcycle"))
             ):
+                quality.dropped("the description fits another object, or the box is occluded, small or far")
                 continue
             rec = {
                 "task_id": None,
@@ -493,6 +545,7 @@ def r1_3(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str
                 "original_subtask_id": "L1-3",
             }
             by_desc.setdefault(d, []).append((rec, [f]))
+    quality.passed(sum(len(v) for v in by_desc.values()))
     # No two records share a description: one (seeded) candidate per description.
     groups: dict[str, list[Any]] = {}
     for d in sorted(by_desc):
@@ -505,10 +558,16 @@ def r1_3(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str
 # -- R1_4 ---------------------------------------------------------------------------------------
 R1_4_FRAMES = 5
 R1_4_STRIDE = 2  # 2 Hz: the five frames span the 2 s up to the moment
+# The original's wordings that ask for the ego's own action in general (its others name a van,
+# the rain or a sign), and two that also ask for the reason the answer gives. One situation is
+# asked at most once per wording (no repeated question+answer).
 R1_4_QUESTIONS = (
     "What action are you currently taking as the driver?",
     "What are you doing right now and why?",
     "Describe the current driving situation and your action.",
+    "What action are you currently taking as a driver?",
+    "What action are you taking at the moment?",
+    "What actions are you currently taking as a driver?",
 )
 # Only drivers whose motion is purposeful: the noisy expert's weaving is not a manoeuvre.
 R1_4_DRIVERS = ("expert", "late_expert", "cautious_expert")
@@ -666,23 +725,32 @@ def situation_answer(m: Moment, frames: list[Frame]) -> str | None:
     return f"{verb} because the road ahead is clear."
 
 
-@register("R1_4", needs=Needs(history=R1_4_FRAMES, history_stride=R1_4_STRIDE))
+# History frames at every regular anchor of the purposeful drivers: about one moment in twelve
+# gives a clear-cut situation not yet asked in that wording.
+@register(
+    "R1_4",
+    needs=Needs(history=R1_4_FRAMES, history_stride=R1_4_STRIDE, oversample=20.0, drivers=R1_4_DRIVERS),
+)
 def r1_4(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str, Any]]:
     groups: dict[str, list[Any]] = {}
     seen: set[str] = set()
     for m in moments:
         if m.driver not in R1_4_DRIVERS:
+            quality.dropped("driver without purposeful motion (noisy_expert)")
             continue
         frames = m.history(R1_4_FRAMES, R1_4_STRIDE)
         if frames is None:
+            quality.dropped("moment without its 5 history frames")
             continue
         answer = situation_answer(m, frames)
         if answer is None:
+            quality.dropped("action or cause not clear-cut in the frames shown")
             continue
         q = R1_4_QUESTIONS[len(seen) % len(R1_4_QUESTIONS)]
         if f"{q}|{answer}" in seen:
             q = next((x for x in R1_4_QUESTIONS if f"{x}|{answer}" not in seen), "")
             if not q:
+                quality.dropped("question and answer already asked")
                 continue  # no two records share question and answer
         seen.add(f"{q}|{answer}")
         rec = {
@@ -700,5 +768,6 @@ def r1_4(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str
         # Balanced over the kind of situation (the action and the cause's kind).
         kind = answer.split(" because ")[-1].split(" ")[0] + "|" + " ".join(answer.split()[:4])
         groups.setdefault(kind, []).append((rec, frames))
+    quality.passed(sum(len(v) for v in groups.values()))
     chosen = quality.balance_groups(groups, n, rng)
     return _finish([c[0] for c in chosen], "R1_4", [c[1] for c in chosen])

@@ -21,6 +21,7 @@ import random
 from collections.abc import Iterable, Sequence
 from typing import Any
 
+from .quality import dropped, passed
 from .rollout import FRONT, SURROUND, Frame, Moment, Needs, Visible, register
 
 VEHICLE_CATEGORIES = ("Vehicle", "Motorcycle")
@@ -195,9 +196,11 @@ def build_r2_1(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
     for m in moments:
         frames = [m.frame(cam) for cam in SURROUND]
         if any(f is None for f in frames):
+            dropped("moment without the six surround frames")
             continue
         clear, unclear = _ambiguous_ids(frames, VEHICLE_CATEGORIES)  # type: ignore[arg-type]
         if unclear:
+            dropped("a vehicle shown only in the dead band")
             continue
         seen_in: dict[int, list[str]] = {}
         actor_of: dict[int, Visible] = {}
@@ -237,6 +240,7 @@ def build_r2_1(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
             "_frames": frames,
         }
         cands.append((rec, count))
+    passed(len(cands))
     picked = _balance_counts(cands, n, rng)
     return _finish(
         picked, "R2_1_A_{}", "L2_1_A_{}", refined_subtask_id="R2-1-A", original_subtask_id="L2-1-A"
@@ -251,9 +255,11 @@ def build_r2_2_a(moments: Sequence[Moment], n: int, rng: random.Random) -> list[
     for m in moments:
         clip = m.clip(R2_2_A_FRAMES, R2_2_A_STRIDE)
         if clip is None:
+            dropped("moment without its 10-frame clip")
             continue
         clear, unclear = _ambiguous_ids(clip, VEHICLE_CATEGORIES)
         if unclear:
+            dropped("a vehicle shown only in the dead band")
             continue
         actor_of = {v.actor.id: v for f in clip for v in f.visible if v.actor.id in clear}
         window = R2_2_A_FRAMES / 2.0
@@ -282,6 +288,7 @@ def build_r2_2_a(moments: Sequence[Moment], n: int, rng: random.Random) -> list[
             "_frames": clip,
         }
         cands.append((rec, len(clear)))
+    passed(len(cands))
     picked = _balance_counts(cands, n, rng)
     return _finish(
         picked, "R2_1_B_{}", "L2_1_B_{}", refined_subtask_id="R2-1-B", original_subtask_id="L2-1-B"
@@ -313,21 +320,26 @@ def _state_at(m: Moment, step: int, actor_id: int, category: str) -> str | None:
     return clear_state(category, actor.status, actor.speed_mps)
 
 
-@register("R2_2_B", Needs(clip=R2_2_B_FRAMES, clip_stride=R2_2_A_STRIDE))
+# Clips also at the extra anchors where a still object is in view: remaining and changing
+# "parked", "stopped" and "standing" are rare at the regular ones.
+@register("R2_2_B", Needs(clip=R2_2_B_FRAMES, clip_stride=R2_2_A_STRIDE, oversample=4.0, at_still=True))
 def build_r2_2_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str, Any]]:
     cands: list[tuple[dict[str, Any], str]] = []
     for m in moments:
         full = m.clip(R2_2_B_FRAMES, R2_2_A_STRIDE)
         if full is None:
+            dropped("moment without its 9-frame clip")
             continue
         first = full[0]
         for target in first.visible:
             cat = target.actor.category
             # A far speck's state change is not something a person can see (audit, issue 33).
             if cat not in STATES or target.distance_m > RELATION_MAX_DISTANCE_M:
+                dropped("object not a vehicle or pedestrian within 40 m")
                 continue
             point = unique_point(first, target)
             if point is None:
+                dropped("no pixel of the object's box outside every other box")
                 continue
             # The longest clip (4 s down to 2 s, as the original's varying durations) whose last
             # frame still shows the object, with the state holding over the first two and the
@@ -343,6 +355,7 @@ def build_r2_2_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[
                     found = (clip, start.pop(), end.pop())
                     break
             if found is None:
+                dropped("state unclear at either end of every clip that shows the object")
                 continue
             clip, s, e = found
             last = clip[-1]
@@ -398,6 +411,7 @@ def build_r2_2_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[
                 "_frames": clip,
             }
             cands.append((rec, answer))
+    passed(len(cands))
     # Balanced within each asked class (the class is in the question).
     from .quality import balance_within_classes, letter_options
 
@@ -458,6 +472,7 @@ def build_r2_3(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
     for m in moments:
         f = m.frame(FRONT)
         if f is None:
+            dropped("moment without a CAM_FRONT frame")
             continue
         objs = [
             (v, p)
@@ -473,6 +488,7 @@ def build_r2_3(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
                 # as a reference frame" then give the same sector.
                 refs = [o for o in (a_obj, b_obj) if reference_agrees(m, o)]
                 if not refs:
+                    dropped("neither object can be the reference (heading within 45° of the ego's)")
                     continue
                 ref = refs[0] if len(refs) == 1 else refs[rng.randrange(2)]
                 subj = b_obj if ref is a_obj else a_obj
@@ -481,6 +497,7 @@ def build_r2_3(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
                 rxy = ego_xy(m, ref.actor.x, ref.actor.y)
                 rel = relation(sxy, rxy)
                 if rel is None:
+                    dropped("objects too close or the direction near a sector edge")
                     continue
                 # No neighbouring sector among the distractors: "Rear" and "Rear-Right" can
                 # both describe a car 15 m behind and one lane over.
@@ -524,6 +541,7 @@ def build_r2_3(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
                     "_frames": [f],
                 }
                 cands.append((rec, rel))
+    passed(len(cands))
     picked = _balance_by(cands, n, rng)
     from .quality import letter_options
 

@@ -20,6 +20,7 @@ import string
 from collections.abc import Sequence
 from typing import Any
 
+from .quality import dropped, passed
 from .r2 import _balance_by, _finish, image_path, point_is_unique, sample_token, scene_token
 from .rollout import FRONT, WHOLE_FIGURE, Moment, Needs, register
 
@@ -125,18 +126,23 @@ def build_r3_1(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
     for m in moments:
         f = m.frame(FRONT)
         if f is None:
+            dropped("moment without a CAM_FRONT frame")
             continue
         for target in f.visible:
             a = target.actor
             if target.distance_m > OUTCOME_MAX_DISTANCE_M or a.subtype not in NOUN:
+                dropped("object over 40 m away or of no asked kind")
                 continue
             if not point_is_unique(f, target, target.center_px):
+                dropped("the object's box centre lies in another box")
                 continue
             future = m.future(a.id, HORIZON_S)
             if len(future) < steps:
+                dropped("the object leaves the world within 3 s")
                 continue  # left the world before the horizon: its outcome is not known
             if a.category == "Pedestrian":
                 if target.visible_fraction < WHOLE_FIGURE:
+                    dropped("a pedestrian cut off or half hidden")
                     continue  # walking or standing cannot be told from a cut-off figure
                 outcome = pedestrian_outcome(a.speed_mps, a.yaw, future)
                 pool = PEDESTRIAN_DISTRACTORS.get(outcome or "", ())
@@ -144,6 +150,7 @@ def build_r3_1(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
                 outcome = vehicle_outcome(a.speed_mps, a.yaw, a.x, a.y, future)
                 pool = DISTRACTORS.get(outcome or "", ())
             if outcome is None:
+                dropped("motion near a class boundary")
                 continue
             others = sorted(pool)
             rng.shuffle(others)
@@ -181,6 +188,7 @@ def build_r3_1(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
                 "_frames": [f],
             }
             cands.append((rec, outcome))
+    passed(len(cands))
     picked = _balance_by(cands, n, rng)
     from .quality import letter_options
 
@@ -194,6 +202,7 @@ def build_r3_2(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
     for m in moments:
         clip = m.clip(R3_2_CLIP, 2)
         if clip is None:
+            dropped("moment without its clip")
             continue
         n_images = 3 + rng.randrange(3)
         # The smallest stride (in clip frames) at which consecutive frames are far enough apart.
@@ -210,9 +219,11 @@ def build_r3_2(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
                 chosen = (stride, frames, egos)
                 break
         if chosen is None:
+            dropped("the ego too slow or the frames under 3 m apart")
             continue
         stride, frames, egos = chosen
         if len({fr.name for fr in frames}) != len(frames):
+            dropped("two identical images")
             continue  # two identical images: no order to see
         labels = list(string.ascii_uppercase[:n_images])
         perm = list(range(n_images))
@@ -247,6 +258,7 @@ def build_r3_2(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
             "_frames": frames,
         }
         cands.append((rec, str(n_images)))
+    passed(len(cands))
     picked = _balance_by(cands, n, rng)
     out = _finish(picked, "R3_2_{}", "L3_2_{}", refined_subtask_id="R3-2", original_subtask_id="L3-2")
     for i, rec in enumerate(out):

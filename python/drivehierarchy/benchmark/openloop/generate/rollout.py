@@ -115,66 +115,21 @@ CATEGORY: dict[str, tuple[str, str]] = {
     "static_object": ("Object", "debris"),
 }
 STOPPED_BELOW_MPS = 0.3
-# Basic colour names and their sRGB anchors (nearest in RGB wins): the actor's assigned colour,
-# kept in `ActorState.colour` for the record's meta data only. Question and answer text name
-# the colour the image shows (`pixel_colour_name`).
-COLOURS: tuple[tuple[str, tuple[int, int, int]], ...] = (
-    ("white", (235, 235, 235)),
-    ("black", (25, 25, 25)),
-    ("gray", (128, 128, 128)),
-    ("silver", (190, 190, 195)),
-    ("red", (200, 30, 30)),
-    ("blue", (30, 60, 200)),
-    ("green", (40, 150, 50)),
-    ("yellow", (230, 200, 40)),
-    ("orange", (240, 130, 30)),
-    ("brown", (120, 75, 40)),
-    ("purple", (120, 50, 150)),
-)
 
 
 def colour_name(rgb: Sequence[int]) -> str:
+    """The name of a body colour (an actor's palette entry or a scenario's own `color`): the
+    renderer's one palette-to-name mapping (`render::palette::name_of`, docs/rendering.md)."""
     r, g, b = (int(v) for v in rgb)
-    return min(COLOURS, key=lambda c: (c[1][0] - r) ** 2 + (c[1][1] - g) ** 2 + (c[1][2] - b) ** 2)[0]
+    return str(_core.colour_name((r, g, b)))
 
 
-# The one palette-to-name mapping for the colour an image shows (docs/openloop-generate.md):
-# the per-channel median of the actor's unoccluded pixels in HSV. Achromatic (saturation below
-# ACHROMATIC_S): black / gray / white by value; chromatic: hue ranges, dark orange-red hues
-# brown. Between two ranges the colour is one people may name either way: no name ("").
-ACHROMATIC_S = 0.20
-CHROMATIC_S = 0.30
-GRAY_V = ((0.0, 0.20, "black"), (0.28, 0.62, "gray"), (0.72, 1.01, "white"))
-HUES = (  # (from, to) degrees, name; red wraps around 0
-    (-15.0, 12.0, "red"),
-    (22.0, 40.0, "orange"),
-    (48.0, 66.0, "yellow"),
-    (80.0, 165.0, "green"),
-    (195.0, 255.0, "blue"),
-    (270.0, 320.0, "purple"),
-)
-BROWN_MAX_V = 0.55  # orange hues this dark read as brown
-DARK_MAX_V = 0.25  # chromatic but this dark: reads as black or a dark colour, not named
-DARK_RED_MAX_V = 0.35  # a red this dark may be called brown: not named
-
-
-def pixel_colour_name(rgb: Sequence[int]) -> str:
-    """The colour name a person gives the median rendered colour `rgb`, or "" in a dead band."""
-    import colorsys
-
-    h, s, v = colorsys.rgb_to_hsv(*(int(c) / 255.0 for c in rgb))
-    if s < ACHROMATIC_S:
-        return next((name for lo, hi, name in GRAY_V if lo <= v < hi), "")
-    if s < CHROMATIC_S or v < DARK_MAX_V:
-        return ""
-    deg = h * 360.0
-    deg = deg - 360.0 if deg >= 345.0 else deg
-    name = next((nm for lo, hi, nm in HUES if lo <= deg < hi), "")
-    if name == "orange" and v < BROWN_MAX_V:
-        return "brown"
-    if name == "red" and v < DARK_RED_MAX_V:
-        return ""  # dark red and brown look alike
-    return name
+def shown_colour(painted: str, seen: str | None) -> str:
+    """The colour word for an actor in one image: the name the renderer gives its visible body
+    paint (`seen`, `render::palette::name_pixels`), when it agrees with the name of the colour
+    it is painted with (`painted`). When they differ (paint near a name boundary, shade, light)
+    a person may use either word: none is used ("")."""
+    return seen if seen and seen == painted else ""
 
 
 @dataclass(frozen=True)
@@ -267,7 +222,7 @@ class Visible:
     visible_fraction: float
     pixel_count: int  # silhouette pixels
     visible_pixels: int  # unoccluded silhouette pixels
-    # Colour name of the actor's own unoccluded pixels in this image ("" when none fits).
+    # Colour word of the actor in this image (`shown_colour`; "" when none is clear).
     colour: str = ""
 
 
@@ -428,6 +383,11 @@ class Needs:
     # Candidate moments the builder needs per record asked (its rejection rate): costly frames
     # are rendered at `oversample × per_task` anchors (front-only needs: at every anchor).
     oversample: float = 1.5
+    # Also rendered at the extra anchors where a still object is in view (`still_in_view`).
+    at_still: bool = False
+    # Only in rollouts of these drivers (empty: all): a task that never asks about the others'
+    # moments does not pay for their frames.
+    drivers: tuple[str, ...] = ()
 
 
 Builder = Callable[[Sequence[Moment], int, random.Random], list[dict[str, Any]]]
@@ -550,7 +510,7 @@ def _visible(
                 visible_fraction=round(frac, 4),
                 pixel_count=total,
                 visible_pixels=vis,
-                colour=pixel_colour_name(p.get("visible_rgb", (0, 0, 0))) if vis else "",
+                colour=shown_colour(a.colour, p.get("colour_name")) if vis else "",
             )
         )
     out.sort(key=lambda v: (v.distance_m, v.actor.id))
@@ -601,11 +561,45 @@ def _route_light(state: Any, i_dist: int, i_stop: int, sim: Any) -> RouteLight:
     return RouteLight(dist, "unknown" if yellow else "red")
 
 
+# Extra anchors: between the regular ones, a decision where the front camera looks at a still
+# object (a vehicle parked at the kerb, one standing with its brake lamps lit, a person standing)
+# becomes an anchor too, at least STILL_GAP decisions from every other anchor. Such objects are
+# rare in the suite's scenes, and a status or state question needs both kinds in balance
+# (R1_1_C, R1_3, R2_2_B); regular anchors alone leave those tasks short. The answers still come
+# from the rendered frame and the tasks' rules, which may reject the moment.
+STILL_GAP = 3
+STILL_VIEW_M = 60.0
+STILL_VIEW_DEG = 35.0  # half the front camera's 70° field of view
+
+
+def still_in_view(ego: EgoState, actors: dict[int, ActorState], standing: dict[int, str]) -> bool:
+    """Whether an object standing still is in front of the ego within the front camera's view."""
+    c, s = math.cos(ego.yaw), math.sin(ego.yaw)
+    for a in actors.values():
+        if a.category == "Vehicle":
+            still = (a.motion == "static" and standing.get(a.id) == "kerb") or (
+                a.motion != "static" and a.braking and a.speed_mps <= 0.05
+            )
+        else:
+            still = a.category == "Pedestrian" and a.speed_mps <= 0.05
+        if not still:
+            continue
+        dx, dy = a.x - ego.x, a.y - ego.y
+        fwd, left = dx * c + dy * s, -dx * s + dy * c
+        if 3.0 <= fwd <= STILL_VIEW_M and abs(math.degrees(math.atan2(left, fwd))) <= STILL_VIEW_DEG:
+            return True
+    return False
+
+
 def choose_anchors(seed: int, key: str, n_steps_hint: int, spacing: int, first: int) -> list[int]:
     """Deterministic anchor decisions: a seeded offset, then every `spacing` decisions."""
     rng = random.Random(f"{seed}|{key}")
     start = first + rng.randrange(spacing)
     return list(range(start, n_steps_hint, spacing))
+
+
+# Regular anchors: every ANCHOR_SPACING_S of an episode from a seeded offset.
+ANCHOR_SPACING_S = 1.5
 
 
 def rollout(
@@ -616,7 +610,7 @@ def rollout(
     *,
     shares: Sequence[float] | None = None,
     split: str = "eval",
-    spacing_s: float = 4.5,
+    spacing_s: float = ANCHOR_SPACING_S,
     first_s: float = 2.0,
     max_s: float = 90.0,
     size: tuple[int, int] = IMAGE_SIZE,
@@ -647,9 +641,22 @@ def rollout(
             # One draw per anchor for all needs: the costly frames (clips, surround) of
             # different tasks land on the same anchors and are rendered once.
             u = random.Random(f"{seed}|{ro.scenario_id}|{driver}|{a}").random()
-            picked = [nd for nd, share in zip(needs, shares, strict=True) if u < share]
+            picked = [
+                nd
+                for nd, share in zip(needs, shares, strict=True)
+                if u < share and (not nd.drivers or driver in nd.drivers)
+            ]
             for s, cams in frame_plan(picked, a).items():
                 plan.setdefault(s, set()).update(cams)
+        # The cameras (and clips) of an extra anchor: front-only needs and those `at_still`.
+        mine = [not nd.drivers or driver in nd.drivers for nd in needs]
+        still_needs = [
+            nd
+            for nd, ok in zip(needs, mine, strict=True)
+            if ok and (nd.at_still or (nd.cameras, nd.clip, nd.history) == ((FRONT,), 0, 0))
+        ]
+        regular = set(ro.anchors)
+        extra: list[int] = []
         cfgs = {name: camera_config(name, size) for name in SURROUND}
         from drivehierarchy.envs.r4 import STATE_FIELDS
 
@@ -664,6 +671,17 @@ def rollout(
             for st in actors.values():
                 if st.motion == "static" and st.category == "Vehicle" and st.id not in ro.standing:
                     ro.standing[st.id] = where_standing(str(scenario), st)
+            if (
+                still_needs
+                and step not in regular
+                and not any(a in regular for a in range(step - STILL_GAP + 1, step + STILL_GAP))
+                and (not extra or step - extra[-1] >= STILL_GAP)
+                and still_in_view(ro.states[-1][1], actors, ro.standing)
+            ):
+                extra.append(step)
+                for s, cams in frame_plan(still_needs, step).items():
+                    if s >= step:  # (history before it is past: an extra anchor has none)
+                        plan.setdefault(s, set()).update(cams)
             exp = sim.expert_action()
             ro.expert_actions.append((float(exp[0]), float(exp[1])))
             for cam in sorted(plan.get(step, ())):
@@ -682,7 +700,7 @@ def rollout(
                 )
                 break
         # The final state has no action; anchors need a state, so keep them inside.
-        ro.anchors = [s for s in ro.anchors if s < len(ro.states)]
+        ro.anchors = sorted(s for s in (*ro.anchors, *extra) if s < len(ro.states))
         return ro
     finally:
         env.close()

@@ -33,9 +33,11 @@ SPLITS = ("eval", "train")
 EVAL_SEEDS = (0, 1, 2, 3, 4)
 TRAIN_SEED_BASE = 100_000
 # Rollouts per record asked of each task: 200 per task plays every scenario of the R4 suite
-# once (each rollout yields ~7.5 moments, one every 4.5 s from a seeded offset).
-ROLLOUTS_PER_RECORD = 0.5
-MOMENTS_PER_ROLLOUT = 7.5
+# once and half of them again with another driver and seed (each rollout yields ~22.5 regular
+# moments, one every 1.5 s from a seeded offset, and the extra ones where a still object is in
+# view). Fewer leave R1_4 (distinct situations) and R1_1_C (still vehicles) short.
+ROLLOUTS_PER_RECORD = 0.75
+MOMENTS_PER_ROLLOUT = 22.5
 # Enough scenes for small sets (tests) to have an answer for every task.
 MIN_ROLLOUTS = 10
 # Anchors with costly frames beyond `oversample × per_task` (small sets vary the most).
@@ -196,7 +198,8 @@ def generate(
     """Writes the question set; returns the summary also written to `generation.json`, with
     the quality table (`quality`: text-only prior against chance, balance and diversity per
     task). With `strict` (default: from `quality.PRIOR_STRICT_MIN_RECORDS` records per task on)
-    a task whose table row names a problem fails the set after it is written."""
+    a task whose table row names a problem (a short task included) fails the set after it is
+    written; a task with no records fails it at any size unless `strict` is False."""
     from drivehierarchy.benchmark.openloop.records import TASK_FILE_STEM
 
     if per_task < 1:
@@ -241,10 +244,13 @@ def generate(
     }
     cat_of = {r.scenario_id: r.category for r in rollouts}
     built: dict[str, list[dict[str, Any]]] = {}
+    funnels: dict[str, dict[str, int]] = {}
     cats: dict[str, set[str]] = {}
     for task, (build, _) in registry.items():
         rng = random.Random(f"{seed}|{split}|{task}")
-        recs = build(moments, per_task, rng)
+        with quality.tracking() as funnel:
+            recs = build(moments, per_task, rng)
+        funnels[task] = dict(sorted(funnel.items()))
         built[task] = recs
         cats[task] = {cat_of.get(quality.scene_of(r), "") for r in recs} - {""}
         lines = []
@@ -262,22 +268,27 @@ def generate(
             "file": path.name,
             "records": len(recs),
             "sha256": hashlib.sha256("".join(lines).encode()).hexdigest(),
+            "candidates": funnels[task],
         }
     if ours:  # images of the earlier set that this one no longer uses
         for p in sorted((out / "images").iterdir()):
             if p.is_file() and p.name not in written:
                 p.unlink()
     summary["images"] = len(written)
-    rows = quality.quality_rows(built, cats)
+    rows = quality.quality_rows(built, cats, asked=per_task, funnels=funnels)
     summary["quality"] = rows
     summary["scenario_categories"] = sorted(set(cat_of.values()))
     (out / "generation.json").write_text(
         json.dumps(summary, indent=2, ensure_ascii=False) + "\n", encoding="utf-8"
     )
+    # By default an empty task file is an error at any size; a short one (like every other
+    # problem) only from the default size on (small sets are previews: their table flags it).
+    # `strict=False` (timing runs) never fails, `strict=True` fails on any problem.
+    empty_fails = strict is not False
     if strict is None:
         strict = per_task >= quality.PRIOR_STRICT_MIN_RECORDS
-    bad = [r for r in rows if r["problems"]]
-    if strict and bad:
+    bad = [r for r in rows if r["problems"] and (strict or (empty_fails and r["records"] == 0))]
+    if bad:
         raise quality.QualityError(
             f"{out}: the set fails its quality checks:\n"
             + "\n".join(f"  {r['task']}: {'; '.join(r['problems'])}" for r in bad)
