@@ -450,7 +450,12 @@ def main() -> None:
     ap.add_argument(
         "--budget", type=budget_arg, action="append", default=[], help="JOB=MINUTES wall-time budget"
     )
-    ap.add_argument("--only", action="append", default=[], help="train only these jobs (repeatable)")
+    ap.add_argument(
+        "--only",
+        action="append",
+        default=[],
+        help="train and evaluate only these jobs (repeatable; 'references' = the reference drivers)",
+    )
     ap.add_argument("--splits", default="seeds,scenarios", help="comma-separated: seeds, scenarios")
     ap.add_argument("--test-seeds", type=int, default=5, help="evaluation seeds 0..K-1 (default 5)")
     ap.add_argument("--jobs", type=int, default=2, help="scenarios evaluated at once")
@@ -473,13 +478,16 @@ def main() -> None:
         for split in splits:
             run_jobs(split, a)
         if not a.no_eval:
-            agents = {
-                f"{split}_{j.name}": f"sb3:{a.out / split / j.name / 'model.zip'}"
-                for split in splits
-                for j in jobs_for(split, a)
-                if j.name != "data"
-            }
-            agents.update({f"ref_{slug.replace('@', '')}": slug for slug in REFERENCES.values()})
+            agents = {}
+            for split in splits:
+                for j in jobs_for(split, a):
+                    model = a.out / split / j.name / "model.zip"
+                    if j.name != "data" and model.exists():
+                        agents[f"{split}_{j.name}"] = f"sb3:{model}"
+                    elif j.name != "data":
+                        print(f"[{split}] {j.name}: no model yet, not evaluated", flush=True)
+            if not a.only or "references" in a.only:
+                agents.update({f"ref_{slug.replace('@', '')}": slug for slug in REFERENCES.values()})
             evaluate(a, agents)
     if a.quick:
         # The smoke run checks the table step on its own folder, never the docs.
