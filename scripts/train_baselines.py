@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import re
 import shutil
 import time
 from dataclasses import dataclass, field
@@ -220,9 +221,9 @@ def read_csv(path: Path) -> list[dict[str, Any]]:
 
 
 def scenario_of(key: str) -> str:
-    """`<category>/<stem>` of an evaluation key (`<category>__<stem>`, seed suffixes dropped)."""
+    """`<category>/<stem>` of an evaluation key (`<category>__<stem>[__s<seed>]`)."""
     cat, _, rest = key.partition("__")
-    return f"{cat}/{rest.split('@')[0]}"
+    return f"{cat}/{re.sub(r'__s[0-9]+$', '', rest)}"
 
 
 def summarize(rows: list[dict[str, Any]], keep: set[str] | None = None) -> dict[str, Any]:
