@@ -175,6 +175,26 @@ def recorded_minutes(base: Path) -> float | None:
     return None
 
 
+def test_suite(a: argparse.Namespace, slug: str) -> Path | str:
+    """What an agent is evaluated on: the whole suite, except a `scenarios`-split model, which
+    plays only its split's test files (linked into OUT/scenarios/test_suite, maps beside it)."""
+    if not slug.startswith("scenarios_"):
+        return a.suite
+    from drivehierarchy.baselines.splits import make_split
+    from drivehierarchy.benchmark.r4.runner import suite_scenarios
+
+    folder = a.out / "scenarios" / "test_suite" / "r4"
+    for path in make_split(suite_scenarios(a.suite), "scenarios").test_paths:
+        link = folder / path.parent.name / path.name
+        if not link.exists():
+            link.parent.mkdir(parents=True, exist_ok=True)
+            link.symlink_to(path.resolve())
+            maps = folder.parent / "maps"
+            if not maps.exists():
+                maps.symlink_to(path.resolve().parent.parent.parent / "maps")
+    return folder
+
+
 def evaluate(a: argparse.Namespace, agents: dict[str, str]) -> None:
     for slug, agent in agents.items():
         ev = a.out / "eval" / slug
@@ -182,7 +202,7 @@ def evaluate(a: argparse.Namespace, agents: dict[str, str]) -> None:
             continue
         print(f"evaluate {slug}: {agent}", flush=True)
         run(
-            *("r4", "evaluate", "--agent", agent, "--suite", a.suite, "--seed", 0),
+            *("r4", "evaluate", "--agent", agent, "--suite", test_suite(a, slug), "--seed", 0),
             *("--seeds", a.test_seeds, "--jobs", a.jobs, "--out", ev),
         )
 
