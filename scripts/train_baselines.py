@@ -124,6 +124,11 @@ def jobs_for(split: str, a: argparse.Namespace) -> list[Job]:
     return [j for j in jobs if not a.only or j.name in a.only or j.name == "data"]
 
 
+def all_jobs(split: str, a: argparse.Namespace) -> list[Job]:
+    """Every job of a split, whatever `--only` selects (the table shows all that were run)."""
+    return jobs_for(split, argparse.Namespace(**{**vars(a), "only": []}))
+
+
 def run(*args: object) -> None:
     code = dh([str(x) for x in args])
     if code != 0:
@@ -335,10 +340,10 @@ def build_table(a: argparse.Namespace, root: Path) -> str:
     meta: dict[str, Any] = {}
     if not a.table_only:
         for split in ("seeds", "scenarios"):
-            for job in jobs_for(split, a):
+            for job in all_jobs(split, a):
                 folder = a.out / split / job.name
                 ev = a.out / "eval" / f"{split}_{job.name}" / "results.jsonl"
-                if job.name != "data" and ev.exists():
+                if job.name != "data" and (ev.parent / "summary.json").exists():  # a finished evaluation
                     write_csv(ev, res / split / f"{job.name}.csv")
                     for name in ("train_log.jsonl", "timing.jsonl", "split.json", "wall.jsonl"):
                         if (folder / name).exists():
@@ -351,9 +356,9 @@ def build_table(a: argparse.Namespace, root: Path) -> str:
                         pass
         for slug in REFERENCES.values():
             ev = a.out / "eval" / f"ref_{slug.replace('@', '')}" / "results.jsonl"
-            if ev.exists():
+            if (ev.parent / "summary.json").exists():
                 write_csv(ev, res / "reference" / f"{slug.replace('@', '')}.csv")
-    labels = {j.name: j.label for s in ("seeds", "scenarios") for j in jobs_for(s, a)}
+    labels = {j.name: j.label for s in ("seeds", "scenarios") for j in all_jobs(s, a)}
     ref_rows = [(lbl, res / "reference" / f"{slug.replace('@', '')}.csv") for lbl, slug in REFERENCES.items()]
     text: list[str] = []
     for split in ("seeds", "scenarios"):
@@ -363,11 +368,12 @@ def build_table(a: argparse.Namespace, root: Path) -> str:
         keep_test: set[str] | None = None
         if split_file is not None and split == "scenarios":
             keep_test = set(json.loads(split_file.read_text())["split"]["test"])
-        learned = (
-            [(labels.get(p.stem, p.stem), p) for p in sorted((res / split).glob("*.csv"))]
-            if (res / split).exists()
-            else []
-        )
+        order = list(labels)
+        found = sorted((res / split).glob("*.csv")) if (res / split).exists() else []
+        found.sort(key=lambda p: order.index(p.stem) if p.stem in order else len(order))
+        learned = [(labels.get(p.stem, p.stem), p) for p in found]
+        if not learned:
+            continue
         rows: list[tuple[str, dict[str, Any]]] = []
         for label, path in [*learned, *ref_rows]:
             if path.exists():
