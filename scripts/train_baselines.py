@@ -323,7 +323,7 @@ def dagger_curve(folder: Path, png: Path, title: str) -> bool:
     for r in rounds:
         ax.annotate(f"β={r['beta']:.2g}", (r["samples"], r["rollout_mean_score"]), fontsize=7)
     ax.set_xlabel("aggregated samples (decisions)")
-    ax.set_ylabel("S_R4 of the round's rollouts")
+    ax.set_ylabel("S_R4 of the round's rollouts\n(expert with prob. β, training seeds)")
     ax.set_ylim(0, 100)
     ax.set_title(title)
     fig.tight_layout()
