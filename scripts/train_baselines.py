@@ -486,7 +486,10 @@ def main() -> None:
     ap.add_argument("--splits", default="seeds,scenarios", help="comma-separated: seeds, scenarios")
     ap.add_argument("--test-seeds", type=int, default=5, help="evaluation seeds 0..K-1 (default 5)")
     ap.add_argument("--jobs", type=int, default=2, help="scenarios evaluated at once")
-    ap.add_argument("--no-eval", action="store_true", help="train only")
+    ap.add_argument("--no-eval", action="store_true", help="skip the evaluation")
+    ap.add_argument(
+        "--no-train", action="store_true", help="skip the training jobs (evaluate / tabulate what exists)"
+    )
     ap.add_argument("--docs", type=Path, help="write the results section into this Markdown file")
     ap.add_argument("--table-only", action="store_true", help="rebuild --docs from the committed CSVs only")
     ap.add_argument(
@@ -502,7 +505,7 @@ def main() -> None:
     splits = [s for s in a.splits.split(",") if s]
     if not a.table_only:
         a.out.mkdir(parents=True, exist_ok=True)
-        for split in splits:
+        for split in splits if not a.no_train else []:
             run_jobs(split, a)
         if not a.no_eval:
             agents = {}
