@@ -73,6 +73,13 @@ impl SimBatch {
     /// Applies `ops[i]` to env i, all envs in parallel; outcomes in env order. An env's failure
     /// is returned as the first failing env's error, naming it; the other envs' ops have run.
     pub fn run(&mut self, ops: Vec<BatchOp>) -> Result<Vec<BatchOutcome>> {
+        let outs = self.run_some(ops.into_iter().map(Some).collect())?;
+        Ok(outs.into_iter().flatten().collect())
+    }
+
+    /// As [`SimBatch::run`], but env i is left as it is where `ops[i]` is `None` (its outcome is
+    /// `None`): the partial reset of a vector env's `reset_mask`.
+    pub fn run_some(&mut self, ops: Vec<Option<BatchOp>>) -> Result<Vec<Option<BatchOutcome>>> {
         if ops.len() != self.sims.len() {
             return Err(Error::config(
                 "ops",
@@ -81,23 +88,23 @@ impl SimBatch {
             ));
         }
         let sims = &mut self.sims;
-        let results: Vec<Result<BatchOutcome>> = self.pool.install(|| {
+        let results: Vec<Result<Option<BatchOutcome>>> = self.pool.install(|| {
             sims.par_iter_mut()
                 .zip(ops)
                 .map(|(sim, op)| match op {
-                    BatchOp::Reset { seed, variation } => {
-                        sim.reset_varied(seed, variation).map(|(observation, info)| BatchOutcome {
-                            observation,
-                            reward: 0.0,
-                            terminated: false,
-                            info,
+                    None => Ok(None),
+                    Some(BatchOp::Reset { seed, variation }) => {
+                        sim.reset_varied(seed, variation).map(|(observation, info)| {
+                            Some(BatchOutcome { observation, reward: 0.0, terminated: false, info })
                         })
                     }
-                    BatchOp::Step(action) => sim.step(action).map(|o| BatchOutcome {
-                        observation: o.observation,
-                        reward: o.reward,
-                        terminated: o.terminated,
-                        info: o.info,
+                    Some(BatchOp::Step(action)) => sim.step(action).map(|o| {
+                        Some(BatchOutcome {
+                            observation: o.observation,
+                            reward: o.reward,
+                            terminated: o.terminated,
+                            info: o.info,
+                        })
                     }),
                 })
                 .collect()

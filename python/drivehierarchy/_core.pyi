@@ -175,6 +175,9 @@ class SimBatch:
         resets: list[tuple[int, int] | None],
         actions: NDArray[np.float64] | None = None,
     ) -> tuple[dict[str, Any], NDArray[np.float64], NDArray[np.bool_], list[dict[str, Any]]]: ...
+    def reset_some(
+        self, resets: list[tuple[int, int] | None]
+    ) -> tuple[dict[str, Any], list[dict[str, Any]]]: ...
 
 @final
 class SumoSession:

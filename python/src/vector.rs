@@ -188,6 +188,40 @@ impl PySimBatch {
         let obs = batch_obs(py, outs)?;
         Ok((obs, PyArray1::from_vec(py, rewards), PyArray1::from_vec(py, terminated), infos))
     }
+
+    /// Resets env i with `resets[i]` = (world seed, variation) where given and leaves the
+    /// others as they are (a vector env's `reset_mask`). Returns `(observations, infos)` of the
+    /// reset envs only, in env order: a dict of (k, …) arrays and a list of k dicts.
+    fn reset_some<'py>(
+        &mut self,
+        py: Python<'py>,
+        resets: Vec<Option<(u64, u64)>>,
+    ) -> PyResult<(Bound<'py, PyDict>, Bound<'py, PyList>)> {
+        let n = self.inner.len();
+        if resets.len() != n {
+            return Err(err(
+                py,
+                dh_env::Error::config("resets", resets.len(), format!("expected {n} entries")),
+            ));
+        }
+        if resets.iter().all(Option::is_none) {
+            return Err(err(py, dh_env::Error::config("resets", "all None", "expected at least one reset")));
+        }
+        let ops = resets
+            .into_iter()
+            .map(|r| r.map(|(seed, variation)| BatchOp::Reset { seed, variation }))
+            .collect();
+        let inner = &mut self.inner;
+        let outs: Vec<BatchOutcome> =
+            py.detach(|| inner.run_some(ops)).map_err(|e| err(py, e))?.into_iter().flatten().collect();
+        let infos = PyList::empty(py);
+        for o in &outs {
+            let v = serde_json::to_value(&o.info)
+                .map_err(|e| err(py, dh_env::Error::Simulation(e.to_string())))?;
+            infos.append(to_py(py, &v)?)?;
+        }
+        Ok((batch_obs(py, outs)?, infos))
+    }
 }
 
 impl PySimBatch {

@@ -246,3 +246,44 @@ def test_sumo_scenarios_share_the_process_simulation_or_get_a_process_each() -> 
     venv = make_vec_env([flow, brake], WrapperConfig(traffic="idm"), 2, vec="dummy")
     venv.reset()
     venv.close()
+
+
+def test_stratified_scenario_split_is_70_30_by_category_and_stable() -> None:
+    from drivehierarchy.baselines.splits import make_split, scenario_id, stratified_split
+
+    suite = runner.suite_scenarios("builtin")
+    train, test = stratified_split(suite, 0.3)
+    assert len(train) == 70 and len(test) == 30
+    per_cat: dict[str, int] = {}
+    for p in test:
+        per_cat[p.parent.name] = per_cat.get(p.parent.name, 0) + 1
+    assert set(per_cat.values()) == {3} and len(per_cat) == 10
+    # The order of the files does not matter; the split is recorded by id.
+    assert {scenario_id(p) for p in stratified_split(list(reversed(suite)), 0.3)[1]} == {
+        scenario_id(p) for p in test
+    }
+    split = make_split(suite, "scenarios")
+    record = split.to_dict()
+    assert record["kind"] == "scenarios" and record["test_seeds"] == [0, 1, 2, 3, 4]
+    assert record["train_seeds"][0] == 100_000 and not set(record["train"]) & set(record["test"])
+    seeds = make_split(suite, "seeds").to_dict()
+    assert seeds["train"] == seeds["test"] and len(seeds["train"]) == 100
+    with pytest.raises(ConfigError, match="test_fraction"):
+        stratified_split(suite, 1.0)
+    with pytest.raises(ConfigError, match="split"):
+        make_split(suite, "bogus")  # type: ignore[arg-type]
+
+
+def test_training_envs_never_play_a_test_seed() -> None:
+    """With train_seeds, an explicit reset seed only seeds the draw: seeds 0-4 never reach a world."""
+    env = SuiteEnv([PED, BRAKE], STATE_ONLY, train_seeds=(100_000, 2**31 - 1))
+    played = []
+    for s in [0, 1, 2, 3, 4, None, None]:
+        _, info = env.reset(seed=s)
+        played.append(info["episode_seed"])
+    assert all(p >= 100_000 for p in played)
+    _, again = env.reset(seed=0)
+    assert again["episode_seed"] == played[0]  # the draw is seeded: deterministic
+    with pytest.raises(ConfigError, match="train_seeds"):
+        SuiteEnv([PED], STATE_ONLY, train_seeds=(5, 5))
+    env.close()

@@ -143,8 +143,10 @@ def test_reset_option_switches_scenarios_per_env() -> None:
     assert env.scenario_ids == [ids[1], ids[1]]
     with pytest.raises(ConfigError, match=r"options\.scenario"):
         env.reset(options={"scenario": [OTHER]})
-    with pytest.raises(ConfigError, match="reset_mask"):
-        env.reset(options={"reset_mask": np.ones(2, bool)})
+    with pytest.raises(ConfigError, match="reset_mask"):  # supported, but must be a (num_envs,) bool mask
+        env.reset(options={"reset_mask": np.ones(3, bool)})
+    with pytest.raises(ConfigError, match=r"options\.bogus"):
+        env.reset(options={"bogus": 1})
 
 
 def test_sumo_traffic_is_refused_with_the_scenario_named() -> None:

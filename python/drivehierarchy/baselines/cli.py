@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from drivehierarchy._core import ConfigError
+from drivehierarchy.baselines.splits import Split
 from drivehierarchy.envs.traffic.modes import TRAFFIC_MODES, traffic_mode_arg
 
 
@@ -23,10 +24,17 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     def suite_args(p: argparse.ArgumentParser) -> None:
         p.add_argument("--suite", default="builtin", help="'builtin', a folder of scenarios, or one file")
         p.add_argument(
-            "--held-out",
-            default="0.3",
-            help="held-out scenarios: a fraction of the files (stable hash split) or comma-separated "
-            "<category>/<name> ids; training uses the rest (default 0.3)",
+            "--split",
+            default="seeds",
+            choices=["seeds", "scenarios"],
+            help="seeds: train on every file at seeds >= 100000, test on seeds 0-4 (the benchmark's); "
+            "scenarios: also hold out --test-fraction of each category's files (transfer)",
+        )
+        p.add_argument(
+            "--test-fraction",
+            type=float,
+            default=0.3,
+            help="share of each category held out (--split scenarios)",
         )
         p.add_argument("--seed", type=int, default=0)
 
@@ -46,14 +54,31 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     tr = cmds.add_parser("train", help="train a policy; writes OUT/model.zip")
     tr.add_argument("algo", choices=["ppo", "sac", "bc", "dagger"])
     tr.add_argument("--out", type=Path, required=True, help="output directory (resumable for ppo/sac)")
-    tr.add_argument("--data", type=Path, help="demonstrations from `collect` (bc, dagger)")
+    tr.add_argument(
+        "--data",
+        type=Path,
+        help="demonstrations from `collect` (bc; dagger: its first round, else expert rollouts)",
+    )
     tr.add_argument("--steps", type=int, default=1_000_000, help="environment steps (ppo, sac)")
     tr.add_argument("--envs", type=int, default=8, help="parallel envs (ppo, sac)")
-    tr.add_argument("--vec", default="auto", choices=["auto", "subproc", "dummy"], help="vectorisation")
+    tr.add_argument(
+        "--vec",
+        default="auto",
+        choices=["auto", "subproc", "dummy", "native"],
+        help="vectorisation (native: the Rust batch via the SB3 adapter; SUMO scenarios need --traffic idm)",
+    )
     tr.add_argument("--max-minutes", type=float, help="stop this run's learning after N minutes (ppo, sac)")
     tr.add_argument("--checkpoint-every", type=int, default=50_000, help="steps between checkpoints")
     tr.add_argument("--epochs", type=int, default=60, help="passes over the data (bc; dagger per round)")
     tr.add_argument("--iterations", type=int, default=6, help="DAgger rounds")
+    tr.add_argument(
+        "--episodes-per-iter", type=int, help="DAgger episodes per round (default: one per training file)"
+    )
+    tr.add_argument(
+        "--init",
+        type=Path,
+        help="ppo: start from this model.zip's policy (e.g. a DAgger model) instead of scratch",
+    )
     tr.add_argument("--obs", default="state", choices=["state", "bev", "state+bev"])
     tr.add_argument("--bev-size", type=int, default=128, help="side of the BEV image (obs bev, state+bev)")
     tr.add_argument("--action", default="decision", choices=["decision", "raw"])
@@ -79,17 +104,11 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     cv.set_defaults(func=_curve)
 
 
-def split_from_args(args: argparse.Namespace) -> tuple[list[Path], list[Path]]:
-    from drivehierarchy.baselines.wrappers import split_suite
+def split_from_args(args: argparse.Namespace) -> Split:
+    from drivehierarchy.baselines.splits import make_split
     from drivehierarchy.benchmark.r4.runner import suite_scenarios
 
-    scenarios = suite_scenarios(args.suite)
-    held: Any
-    try:
-        held = float(args.held_out)
-    except ValueError:
-        held = [s.strip() for s in args.held_out.split(",") if s.strip()]
-    return split_suite(scenarios, held)
+    return make_split(suite_scenarios(args.suite), args.split, args.test_fraction)
 
 
 def _log(msg: str) -> None:
@@ -99,14 +118,11 @@ def _log(msg: str) -> None:
 def _collect(args: argparse.Namespace) -> int:
     from drivehierarchy.baselines import imitation
 
-    train, held = split_from_args(args)
+    split = split_from_args(args)
     imitation.collect(
-        train, args.episodes, args.out, agent=args.agent, noise=args.noise, seed=args.seed, log=_log
+        split, args.episodes, args.out, agent=args.agent, noise=args.noise, seed=args.seed, log=_log
     )
-    (args.out / "split.json").write_text(
-        json.dumps({"train": [str(p) for p in train], "held_out": [str(p) for p in held]}, indent=2) + "\n",
-        encoding="utf-8",
-    )
+    (args.out / "split.json").write_text(json.dumps(split.to_dict(), indent=2) + "\n", encoding="utf-8")
     return 0
 
 
@@ -129,7 +145,7 @@ def _train(args: argparse.Namespace) -> int:
     from drivehierarchy.baselines.wrappers import WrapperConfig
 
     torch.set_num_threads(max(1, args.threads))
-    train, held = split_from_args(args)
+    split = split_from_args(args)
     wrapper = WrapperConfig(
         action=args.action,
         max_speed_mps=args.max_speed,
@@ -143,8 +159,7 @@ def _train(args: argparse.Namespace) -> int:
 
         train_rl(
             args.algo,
-            train,
-            held,
+            split,
             args.out,
             steps=args.steps,
             n_envs=args.envs,
@@ -154,29 +169,32 @@ def _train(args: argparse.Namespace) -> int:
             checkpoint_every=args.checkpoint_every,
             hyperparams=_hyperparams(args.hp),
             max_minutes=args.max_minutes,
+            init=args.init,
             log=_log,
         )
         return 0
     from drivehierarchy.baselines import imitation
     from drivehierarchy.baselines.rl import write_split
 
-    if args.data is None:
+    if args.data is None and args.algo == "bc":
         raise ConfigError(f"config `data` = None: `train {args.algo}` needs --data DIR from `collect`")
     args.out.mkdir(parents=True, exist_ok=True)
-    write_split(args.out, train, held, wrapper, args.algo)
+    write_split(args.out, split, wrapper, args.algo)
     if args.algo == "bc":
         imitation.train_bc(
-            args.data, train, args.out, epochs=args.epochs, wrapper=wrapper, seed=args.seed, log=_log
+            args.data, split, args.out, epochs=args.epochs, wrapper=wrapper, seed=args.seed, log=_log
         )
     else:
         imitation.train_dagger(
             args.data,
-            train,
+            split,
             args.out,
             iterations=args.iterations,
+            episodes_per_iter=args.episodes_per_iter,
             epochs=max(1, args.epochs // 2),
             wrapper=wrapper,
             seed=args.seed,
+            max_minutes=args.max_minutes,
             log=_log,
         )
     return 0

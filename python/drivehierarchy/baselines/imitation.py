@@ -26,6 +26,7 @@ import numpy as np
 
 from drivehierarchy._core import ConfigError
 from drivehierarchy.baselines.model_io import save_model
+from drivehierarchy.baselines.splits import Split
 from drivehierarchy.baselines.wrappers import ActionCodec, ObsCodec, SuiteEnv, WrapperConfig, make_env
 from drivehierarchy.envs.config import R4Config
 
@@ -69,7 +70,7 @@ def _minari_root(out: Path) -> None:
 
 
 def collect(
-    scenarios: Sequence[Path],
+    split: Split,
     episodes: int,
     out: Path,
     *,
@@ -78,7 +79,8 @@ def collect(
     seed: int = 0,
     log: Any = print,
 ) -> Any:
-    """Drives `episodes` episodes (scenarios in turn) and writes a Minari dataset under `out`.
+    """Drives `episodes` episodes (the split's training scenarios in turn, at seeds drawn from its
+    training seeds) and writes a Minari dataset under `out`.
 
     `noise` > 0: the executed action is the expert's plus Gaussian noise (σ·[0.1 steer,
     2 m/s speed]) on every other episode; labels stay the expert's."""
@@ -92,15 +94,18 @@ def collect(
     _minari_root(out)
     if (out / DATASET_ID).exists():
         raise ConfigError(f"config `out` = {str(out)!r}: a dataset {DATASET_ID} already exists there")
-    base = SuiteEnv(scenarios, STATE_ONLY, order="cycle")
+    scenarios = split.train_paths
+    base = SuiteEnv(scenarios, STATE_ONLY, order="cycle", train_seeds=split.train_seeds)
     labelled = ExpertLabels(base)
     env = minari.DataCollector(labelled, record_infos=True)
     rng = np.random.default_rng(seed)
     scale = np.array([0.1, 2.0], np.float32)
     scores: list[float] = []
+    played: list[int] = []
     t0 = time.perf_counter()
     for ep in range(episodes):
         _, info = env.reset(seed=seed + ep)
+        played.append(int(base.episode_seed or 0))
         noisy = noise > 0 and ep % 2 == 1
         while True:
             a = np.asarray(info["expert_action"], np.float32)
@@ -133,7 +138,8 @@ def collect(
                 "dataset_id": DATASET_ID,
                 "episodes": episodes,
                 "noise": noise,
-                "scenarios": [str(p) for p in scenarios],
+                "split": split.to_dict(),
+                "episode_seeds": played,
                 "mean_score": float(np.mean(scores)),
                 "wall_s": time.perf_counter() - t0,
             },
@@ -171,12 +177,14 @@ def load_demos(data: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def new_policy_model(wrapper: WrapperConfig, scenarios: Sequence[Path], seed: int = 0) -> Any:
-    """An SB3 PPO actor-critic over the wrapped env's spaces (its actor is what BC trains)."""
+    """An SB3 PPO actor-critic over the wrapped env's spaces (its actor is what BC trains): an
+    MLP for the state, SB3's NatureCNN for the BEV image."""
     from stable_baselines3 import PPO
 
-    env = make_env(scenarios, wrapper, monitor=False)
+    env = make_env(scenarios[:1], wrapper, monitor=False)
+    policy = {"state": "MlpPolicy", "bev": "CnnPolicy", "state+bev": "MultiInputPolicy"}[wrapper.obs]
     return PPO(
-        "MlpPolicy",
+        policy,
         env,
         seed=seed,
         device="cpu",
@@ -194,21 +202,24 @@ def fit(
     lr: float = 1e-3,
     seed: int = 0,
 ) -> float:
-    """Regresses the policy's mean action on the normalised labels (MSE); returns the last loss."""
+    """Regresses the policy's mean action on the normalised labels (MSE); returns the last loss.
+    `x` is a batch of policy observations (states, or H×W×3 uint8 BEV images)."""
     import torch as th
 
     policy = model.policy
     policy.set_training_mode(True)
     opt = th.optim.Adam(policy.parameters(), lr=lr)
-    xt, yt = th.as_tensor(x), th.as_tensor(y)
+    yt = th.as_tensor(y)
     gen = th.Generator().manual_seed(seed)
     last = float("nan")
     for _ in range(epochs):
-        perm = th.randperm(len(xt), generator=gen)
+        perm = th.randperm(len(yt), generator=gen).numpy()
         total, n = 0.0, 0
-        for i in range(0, len(xt), batch):
+        for i in range(0, len(yt), batch):
             idx = perm[i : i + batch]
-            mean = policy.get_distribution(xt[idx]).distribution.mean
+            # obs_to_tensor transposes images to the policy's channel-first layout.
+            obs, _ = policy.obs_to_tensor(x[idx])
+            mean = policy.get_distribution(obs).distribution.mean
             loss = th.mean((mean - yt[idx]) ** 2)
             opt.zero_grad()
             loss.backward()
@@ -227,19 +238,26 @@ def _encode(wrapper: WrapperConfig, states: np.ndarray, labels: np.ndarray) -> t
     return x, y
 
 
-def _imitation_wrapper(wrapper: WrapperConfig | None) -> WrapperConfig:
+def _imitation_wrapper(wrapper: WrapperConfig | None, *, images: bool = False) -> WrapperConfig:
     wrapper = wrapper or WrapperConfig()
-    if wrapper.obs != "state" or wrapper.action != "decision":
+    allowed = ("state", "bev") if images else ("state",)
+    if wrapper.obs not in allowed or wrapper.action != "decision":
         raise ConfigError(
-            f"config `obs`/`action` = {wrapper.obs!r}/{wrapper.action!r}: imitation learns from the "
-            "recorded state and the expert's decisions (obs 'state', action 'decision')"
+            f"config `obs`/`action` = {wrapper.obs!r}/{wrapper.action!r}: "
+            + (
+                "DAgger learns the expert's decisions (action 'decision') from 'state' or 'bev'"
+                if images
+                else "BC learns from the recorded state and the expert's decisions (obs 'state', "
+                "action 'decision'); "
+                "for the BEV image use DAgger, which renders it online"
+            )
         )
     return wrapper
 
 
 def train_bc(
     data: Path,
-    scenarios: Sequence[Path],
+    split: Split,
     out: Path,
     *,
     epochs: int = 60,
@@ -251,83 +269,174 @@ def train_bc(
     t0 = time.perf_counter()
     states, labels = load_demos(data)
     x, y = _encode(wrapper, states, labels)
-    model = new_policy_model(wrapper, scenarios, seed)
+    model = new_policy_model(wrapper, split.train_paths, seed)
     loss = fit(model, x, y, epochs=epochs, seed=seed)
     out.mkdir(parents=True, exist_ok=True)
-    path = save_model(model, out / "model.zip", "ppo", wrapper, trained_by="bc", samples=len(x))
+    path = save_model(
+        model, out / "model.zip", "ppo", wrapper, trained_by="bc", samples=len(x), split=split.to_dict()
+    )
     wall = time.perf_counter() - t0
     _write_log(out, {"phase": "bc", "samples": len(x), "epochs": epochs, "loss": loss, "wall_s": wall})
     log(f"BC on {len(x)} samples, {epochs} epochs, loss {loss:.4f}, {wall:.0f} s -> {path}")
     return path
 
 
+def _round_file(out: Path, it: int) -> Path:
+    return out / "rounds" / f"round_{it:03d}.npz"
+
+
+def _rollouts(
+    env: SuiteEnv,
+    model: Any,
+    wrapper: WrapperConfig,
+    *,
+    episodes: int,
+    beta: float,
+    noise: float,
+    seed: int,
+) -> tuple[np.ndarray, np.ndarray, list[float]]:
+    """`episodes` episodes with the mixture policy (expert with probability `beta` per step, else
+    the learner; with `noise` > 0 every other episode adds DART noise to what is executed);
+    returns (policy observations, normalised expert labels, S_R4 of each episode)."""
+    oc, ac = ObsCodec(wrapper), ActionCodec(wrapper)
+    rng = np.random.default_rng(seed)
+    scale = np.array([0.1, 2.0], np.float32)
+    xs: list[Any] = []
+    ys: list[np.ndarray] = []
+    scores: list[float] = []
+    for ep in range(episodes):
+        obs, _ = env.reset(seed=seed + ep)  # seeds the draw of a training seed (train_seeds)
+        noisy = noise > 0 and ep % 2 == 1
+        while True:
+            expert = np.asarray(env.expert_action(), np.float32)
+            o = oc.encode(obs)
+            xs.append(o)
+            ys.append(ac.encode(expert))
+            if model is None or rng.random() < beta:
+                act = expert
+            else:
+                a, _ = model.predict(o, deterministic=True)
+                act = ac.decode(a)
+            if noisy:
+                act = act + rng.normal(0.0, noise, 2).astype(np.float32) * scale
+                act = np.clip(act, env.action_space.low, env.action_space.high)  # type: ignore[attr-defined]
+            obs, _, terminated, truncated, _ = env.step(act)
+            if terminated or truncated:
+                break
+        scores.append(float(env.score()["score_composed"]))
+    return np.stack(xs), np.stack(ys).astype(np.float32), scores
+
+
 def train_dagger(
-    data: Path,
-    scenarios: Sequence[Path],
+    data: Path | None,
+    split: Split,
     out: Path,
     *,
     iterations: int = 6,
     episodes_per_iter: int | None = None,
     epochs: int = 30,
     beta_decay: float = 0.5,
+    noise: float = 1.0,
     wrapper: WrapperConfig | None = None,
     seed: int = 0,
+    max_minutes: float | None = None,
     log: Any = print,
 ) -> Path:
-    """DAgger: BC on the demos, then `iterations` rounds of driving with the mixture policy
-    (expert with probability β = beta_decay^i, else the learner), labelling every visited state
-    with the expert's action (the online teacher), aggregating and refitting."""
-    wrapper = _imitation_wrapper(wrapper)
-    t0 = time.perf_counter()
-    states, labels = load_demos(data)
-    x, y = _encode(wrapper, states, labels)
-    model = new_policy_model(wrapper, scenarios, seed)
-    fit(model, x, y, epochs=epochs * 2, seed=seed)
-    oc, ac = ObsCodec(wrapper), ActionCodec(wrapper)
-    env = SuiteEnv(scenarios, wrapper.env_config(STATE_ONLY), order="cycle")
-    rng = np.random.default_rng(seed)
-    n_eps = episodes_per_iter or len(scenarios)
-    xs, ys = [x], [y]
-    for it in range(1, iterations + 1):
-        beta = beta_decay**it
-        new_x, new_y, scores = [], [], []
-        for ep in range(n_eps):
-            obs, _ = env.reset(seed=seed + 1000 * it + ep)
-            while True:
-                expert = env.expert_action()
-                s = oc.state(obs["state"])
-                new_x.append(s)
-                new_y.append(ac.encode(expert))
-                if rng.random() < beta:
-                    act = expert
-                else:
-                    a, _ = model.predict(s, deterministic=True)
-                    act = ac.decode(a)
-                obs, _, terminated, truncated, _ = env.step(act)
-                if terminated or truncated:
-                    break
-            scores.append(float(env.score()["score_composed"]))
-        xs.append(np.stack(new_x))
-        ys.append(np.stack(new_y))
-        loss = fit(model, np.concatenate(xs), np.concatenate(ys), epochs=epochs, seed=seed + it)
-        _write_log(
-            out,
-            {
-                "phase": "dagger",
-                "iteration": it,
-                "beta": beta,
-                "new_samples": len(new_x),
-                "rollout_mean_score": float(np.mean(scores)),
-                "loss": loss,
-            },
+    """DAgger over the split's training scenarios and seeds. Round 0 is the demonstrations of
+    `data` (state only) or, without data, expert rollouts (DART noise on every other episode);
+    round i ≥ 1 drives with the mixture policy (expert with probability β = beta_decay^i, else
+    the learner), labels every visited state with the expert (the online teacher), aggregates
+    and refits. `obs` 'bev' learns a CNN on the BEV image rendered during the rollouts.
+
+    Resumable: every round's samples (`rounds/round_NNN.npz`) and the model after it
+    (`rounds/model_NNN.zip`) are kept, so a killed run continues after its last whole round.
+    `max_minutes` stops starting new rounds after that much wall time (the model is saved)."""
+    wrapper = _imitation_wrapper(wrapper, images=True)
+    if data is not None and wrapper.obs != "state":
+        raise ConfigError(
+            f"config `data` = {str(data)!r}: demonstrations record the state only; DAgger on "
+            f"obs {wrapper.obs!r} starts from its own expert rollouts (leave out --data)"
         )
+    t0 = time.perf_counter()
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "rounds").mkdir(exist_ok=True)
+    n_eps = episodes_per_iter or len(split.train)
+    model = new_policy_model(wrapper, split.train_paths, seed)
+    env = SuiteEnv(
+        split.train_paths, wrapper.env_config(STATE_ONLY), order="cycle", train_seeds=split.train_seeds
+    )
+    xs: list[np.ndarray] = []
+    ys: list[np.ndarray] = []
+    done = 0
+    while _round_file(out, done).exists():
+        with np.load(_round_file(out, done)) as z:
+            xs.append(z["x"])
+            ys.append(z["y"])
+        done += 1
+    if done:
+        from stable_baselines3 import PPO
+
+        model.set_parameters(
+            PPO.load(str(out / "rounds" / f"model_{done - 1:03d}.zip"), device="cpu").get_parameters()
+        )
+        env._cycle = (done - 1) * n_eps if data is not None else done * n_eps
+        log(f"DAgger: resuming after round {done - 1} ({sum(len(y) for y in ys)} samples)")
+    for it in range(done, iterations + 1):
+        if max_minutes is not None and it > 0 and time.perf_counter() - t0 > max_minutes * 60.0:
+            log(f"DAgger: wall-time budget of {max_minutes} min reached before round {it}")
+            break
+        r0 = time.perf_counter()
+        if it == 0 and data is not None:
+            states, labels = load_demos(data)
+            x, y = _encode(wrapper, states, labels)
+            scores: list[float] = []
+            beta = 1.0
+        else:
+            beta = 1.0 if it == 0 else beta_decay**it
+            x, y, scores = _rollouts(
+                env,
+                model if it > 0 else None,
+                wrapper,
+                episodes=n_eps,
+                beta=beta,
+                noise=noise if it == 0 else 0.0,
+                seed=seed + 1000 * it,
+            )
+        roll_s = time.perf_counter() - r0
+        save = np.savez_compressed if x.dtype == np.uint8 else np.savez  # BEV images compress well
+        save(_round_file(out, it).with_suffix(".tmp.npz"), x=x, y=y)
+        _round_file(out, it).with_suffix(".tmp.npz").replace(_round_file(out, it))
+        xs.append(x)
+        ys.append(y)
+        loss = fit(
+            model,
+            np.concatenate(xs),
+            np.concatenate(ys),
+            epochs=epochs * (2 if it == 0 else 1),
+            seed=seed + it,
+        )
+        model.save(out / "rounds" / f"model_{it:03d}.zip")
+        rec = {
+            "phase": "dagger",
+            "iteration": it,
+            "beta": beta,
+            "new_samples": len(y),
+            "samples": int(sum(len(a) for a in ys)),
+            "rollout_mean_score": float(np.mean(scores)) if scores else None,
+            "loss": loss,
+            "rollout_s": roll_s,
+            "fit_s": time.perf_counter() - r0 - roll_s,
+        }
+        _write_log(out, rec)
         log(
-            f"DAgger {it}/{iterations}: beta {beta:.3f}, +{len(new_x)} samples, rollouts S_R4 "
-            f"{np.mean(scores):.1f}, loss {loss:.4f}"
+            f"DAgger {it}/{iterations}: beta {beta:.3f}, +{len(y)} samples, rollouts S_R4 "
+            f"{rec['rollout_mean_score']}, loss {loss:.4f}, {time.perf_counter() - r0:.0f} s"
         )
     env.close()
-    total = int(sum(len(a) for a in xs))
-    path = save_model(model, out / "model.zip", "ppo", wrapper, trained_by="dagger", samples=total)
+    total = int(sum(len(a) for a in ys))
+    path = save_model(
+        model, out / "model.zip", "ppo", wrapper, trained_by="dagger", samples=total, split=split.to_dict()
+    )
     _write_log(out, {"phase": "done", "samples": total, "wall_s": time.perf_counter() - t0})
     return path
 

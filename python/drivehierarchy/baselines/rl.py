@@ -3,7 +3,7 @@
 Output directory:
 
     model.zip                 the final policy (SB3 archive + drivehierarchy.json wrapper config)
-    split.json                training and held-out scenario files
+    split.json                training / test scenarios and seeds (`splits`)
     checkpoints/rl_model_<N>_steps.zip  (+ SAC's replay buffer) every --checkpoint-every steps
     monitor/<k>.monitor.csv   one line per training episode: shaped return, length, S_R4, reason
     tb/                       TensorBoard logs
@@ -24,6 +24,7 @@ from typing import Any
 
 from drivehierarchy._core import ConfigError
 from drivehierarchy.baselines.model_io import algo_class, save_model
+from drivehierarchy.baselines.splits import Split
 from drivehierarchy.baselines.wrappers import WrapperConfig, make_env
 
 MONITOR_KEYS = ("termination_reason", "score_composed")
@@ -37,10 +38,12 @@ def make_vec_env(
     seed: int = 0,
     vec: str = "auto",
     monitor_dir: Path | None = None,
+    train_seeds: tuple[int, int] | None = None,
 ) -> Any:
     """`n_envs` learner envs: `SubprocVecEnv` (one process each) or `DummyVecEnv` (all in this
     process: the Rust world needs no SUMO process, so many envs share one process cheaply).
-    `auto` = one process per env when there are at least 2 envs and 2 cores, else in-process."""
+    `auto` = one process per env when there are at least 2 envs and 2 cores, else in-process.
+    `train_seeds`: every episode's seed is drawn from this range (`SuiteEnv`)."""
     import os
 
     from stable_baselines3.common.monitor import Monitor
@@ -48,9 +51,24 @@ def make_vec_env(
 
     if n_envs < 1:
         raise ConfigError(f"config `envs` = {n_envs!r}: expected ≥ 1")
-    if vec not in ("auto", "subproc", "dummy"):
-        raise ConfigError(f"config `vec` = {vec!r}: expected 'auto', 'subproc' or 'dummy'")
+    if vec not in ("auto", "subproc", "dummy", "native"):
+        raise ConfigError(f"config `vec` = {vec!r}: expected 'auto', 'subproc', 'dummy' or 'native'")
     paths = [str(p) for p in scenarios]
+    if vec == "native":
+        from stable_baselines3.common.vec_env import VecMonitor
+
+        from drivehierarchy.baselines.vec_sb3 import NativeSuiteVecEnv
+
+        native = NativeSuiteVecEnv(paths, wrapper, n_envs, train_seeds=train_seeds)
+        filename = None
+        if monitor_dir is not None:
+            filename = str(monitor_dir / "native")
+            if Path(filename + ".monitor.csv").exists():
+                # Resuming: VecMonitor always starts its file anew, so keep the old lines aside.
+                Path(filename + ".monitor.csv").rename(_free_name(monitor_dir, "native"))
+        venv: Any = VecMonitor(native, filename=filename, info_keywords=MONITOR_KEYS)
+        venv.seed(seed)
+        return venv
     # SUMO envs in one process work (the first on libsumo, the others on TraCI, a TCP round
     # trip per call), but a process each is faster: `auto` picks subprocesses for them.
     sumo = n_envs >= 2 and sumo_scenarios(paths, wrapper)
@@ -59,7 +77,7 @@ def make_vec_env(
 
     def factory(rank: int) -> Any:
         def make() -> Any:
-            env = make_env(paths, wrapper, monitor=False)
+            env = make_env(paths, wrapper, monitor=False, train_seeds=train_seeds)
             filename = None if monitor_dir is None else str(monitor_dir / f"{rank}")
             # Resuming appends to the existing log (SB3 writes the header only for a new file).
             fresh = filename is None or not Path(filename + ".monitor.csv").exists()
@@ -73,6 +91,13 @@ def make_vec_env(
     venv = SubprocVecEnv(fns, start_method="fork") if vec == "subproc" else DummyVecEnv(fns)
     venv.seed(seed)
     return venv
+
+
+def _free_name(folder: Path, stem: str) -> Path:
+    k = 1
+    while (folder / f"{stem}-{k}.monitor.csv").exists():
+        k += 1
+    return folder / f"{stem}-{k}.monitor.csv"
 
 
 def sumo_scenarios(paths: Sequence[str], wrapper: WrapperConfig) -> list[str]:
@@ -128,8 +153,7 @@ def latest_checkpoint(out: Path) -> Path | None:
 
 def train_rl(
     algo: str,
-    train: Sequence[Path],
-    held_out: Sequence[Path],
+    split: Split,
     out: Path,
     *,
     steps: int,
@@ -140,10 +164,13 @@ def train_rl(
     checkpoint_every: int = 50_000,
     hyperparams: dict[str, Any] | None = None,
     max_minutes: float | None = None,
+    init: Path | None = None,
     log: Any = print,
 ) -> Path:
-    """Trains (or resumes) and writes OUT/model.zip. `max_minutes` stops this run's learning after
-    that much wall time (the model is saved as usual; a later run resumes from it)."""
+    """Trains (or resumes) and writes OUT/model.zip on the split's training scenarios and seeds.
+    `max_minutes` stops this run's learning after that much wall time (the model is saved as
+    usual; a later run resumes from it). `init`: a model.zip (e.g. DAgger's, a PPO actor-critic
+    of the same wrapper) whose policy weights PPO starts from (fine-tuning)."""
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
 
     if steps < 1:
@@ -152,9 +179,17 @@ def train_rl(
     if algo == "sac" and wrapper.obs != "state":
         pass  # SAC's CNN/MultiInput policies work too; nothing to adjust
     out.mkdir(parents=True, exist_ok=True)
-    write_split(out, train, held_out, wrapper, algo)
+    write_split(out, split, wrapper, algo)
     (out / "monitor").mkdir(exist_ok=True)
-    venv = make_vec_env(train, wrapper, n_envs, seed=seed, vec=vec, monitor_dir=out / "monitor")
+    venv = make_vec_env(
+        split.train_paths,
+        wrapper,
+        n_envs,
+        seed=seed,
+        vec=vec,
+        monitor_dir=out / "monitor",
+        train_seeds=split.train_seeds,
+    )
     cls = algo_class(algo)
     policy = {"state": "MlpPolicy", "bev": "CnnPolicy", "state+bev": "MultiInputPolicy"}[wrapper.obs]
     ckpt = latest_checkpoint(out)
@@ -171,7 +206,16 @@ def train_rl(
     else:
         hp = default_hyperparams(algo, n_envs)
         hp.update(hyperparams or {})
+        if init is not None:
+            hp.setdefault("policy_kwargs", {})
+            hp["policy_kwargs"] = {**hp["policy_kwargs"], **_init_policy_kwargs(init, algo, wrapper)}
         model = cls(policy, venv, seed=seed, device="cpu", tensorboard_log=str(out / "tb"), verbose=0, **hp)
+        if init is not None:
+            from drivehierarchy.baselines.model_io import load_model
+
+            start, _, _ = load_model(init)
+            model.policy.load_state_dict(start.policy.state_dict())
+            log(f"initialised the policy from {init}")
         reset = True
     remaining = steps - model.num_timesteps
     if remaining > 0:
@@ -190,7 +234,10 @@ def train_rl(
             tb_log_name=algo,
         )
     wall = time.perf_counter() - t0
-    path = save_model(model, out / "model.zip", algo, wrapper, steps=int(model.num_timesteps))
+    extra: dict[str, Any] = {"steps": int(model.num_timesteps), "split": split.to_dict()}
+    if init is not None:
+        extra["init"] = str(init)
+    path = save_model(model, out / "model.zip", algo, wrapper, **extra)
     venv.close()
     _append_timing(
         out,
@@ -221,19 +268,35 @@ def wall_clock_limit(seconds: float) -> Any:
     return WallClockLimit()
 
 
-def write_split(
-    out: Path, train: Sequence[Path], held_out: Sequence[Path], wrapper: WrapperConfig, algo: str
-) -> None:
-    data = {
-        "algo": algo,
-        "train": [str(p) for p in train],
-        "held_out": [str(p) for p in held_out],
-        "wrapper": wrapper.to_dict(),
-    }
+def _init_policy_kwargs(init: Path, algo: str, wrapper: WrapperConfig) -> dict[str, Any]:
+    """The architecture of the model to start from (so its weights fit), checked against the run."""
+    from drivehierarchy.baselines.model_io import read_meta
+
+    meta = read_meta(init)
+    # What the policy sees and answers must match; traffic and reward are training-only settings.
+    keys = ("obs", "action", "max_speed_mps", "bev_size")
+    theirs = {k: meta["wrapper"].get(k) for k in keys}
+    ours = {k: wrapper.to_dict()[k] for k in keys}
+    if meta["algo"] != algo or theirs != ours:
+        raise ConfigError(
+            f"{init}: field `algo`/`wrapper` = {meta['algo']!r}/{theirs!r}: does not match this "
+            f"run's {algo!r}/{ours!r}, so its weights cannot start it"
+        )
+    import zipfile
+
+    with zipfile.ZipFile(init) as zf:
+        data = json.loads(zf.read("data"))
+    kwargs = data.get("policy_kwargs", {})
+    # SB3 stores policy_kwargs pickled in the JSON; the plain fields are what it needs here.
+    return {k: kwargs[k] for k in ("net_arch", "log_std_init") if k in kwargs}
+
+
+def write_split(out: Path, split: Split, wrapper: WrapperConfig, algo: str) -> None:
+    data = {"algo": algo, "split": split.to_dict(), "wrapper": wrapper.to_dict()}
     path = out / "split.json"
     if path.exists():
         old = json.loads(path.read_text(encoding="utf-8"))
-        if old.get("train") != data["train"] or old.get("algo") != algo:
+        if old.get("split") != data["split"] or old.get("algo") != algo:
             raise ConfigError(
                 f"{path}: field `train`/`algo` differs from this run's: the output directory belongs to "
                 "another training run; use a new --out"

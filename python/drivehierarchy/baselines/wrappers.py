@@ -261,8 +261,11 @@ class SuiteEnv(gym.Env[dict[str, Any], np.ndarray]):
 
     The scenario is drawn from the env's seeded `np_random` (uniformly, or in turn with
     `order="cycle"`), or forced with `reset(options={"scenario": path})`. One Rust world is kept per
-    scenario, so switching costs nothing after the first load. `expert_action()`, `score()`, `sim`
-    and `scenario_path` refer to the current scenario, so the expert and the runner work unchanged.
+    scenario, so switching costs nothing after the first load. With `train_seeds=(lo, hi)` (a
+    training env, see `splits`) every episode seed is drawn from [lo, hi), an explicit
+    `reset(seed=s)` only seeding that draw, so the benchmark's test seeds are never played.
+    `expert_action()`, `score()`, `sim` and `scenario_path` refer to the current scenario, so the
+    expert and the runner work unchanged.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}  # type: ignore[misc]
@@ -272,6 +275,7 @@ class SuiteEnv(gym.Env[dict[str, Any], np.ndarray]):
         scenarios: Sequence[str | Path],
         config: R4Config | None = None,
         order: Literal["random", "cycle"] = "random",
+        train_seeds: tuple[int, int] | None = None,
     ) -> None:
         if not scenarios:
             raise ConfigError("config `scenarios` = []: the suite has no scenario files")
@@ -280,8 +284,12 @@ class SuiteEnv(gym.Env[dict[str, Any], np.ndarray]):
         self.scenarios = [str(p) for p in scenarios]
         self.config = config or R4Config()
         self.order = order
+        if train_seeds is not None and not 0 <= train_seeds[0] < train_seeds[1]:
+            raise ConfigError(f"config `train_seeds` = {train_seeds!r}: expected 0 ≤ lo < hi")
+        self.train_seeds = train_seeds
         self._envs: dict[str, DriveHierarchyR4Env] = {}
         self._cycle = 0
+        self.episode_seed: int | None = None
         self.current = self._env(self.scenarios[0])
         self.observation_space = self.current.observation_space
         self.action_space = self.current.action_space
@@ -311,10 +319,14 @@ class SuiteEnv(gym.Env[dict[str, Any], np.ndarray]):
             previous.release_traffic()
         # An explicit seed reaches the scenario as given (reset(seed=0) is the canonical scenario,
         # as in `r4 evaluate`); unseeded resets draw one, so training sees the seeded variations.
-        sub_seed = seed if seed is not None else int(self.np_random.integers(0, 2**31 - 1))
+        if self.train_seeds is not None:
+            sub_seed = int(self.np_random.integers(*self.train_seeds))
+        else:
+            sub_seed = seed if seed is not None else int(self.np_random.integers(0, 2**31 - 1))
         obs, info = self.current.reset(seed=sub_seed, options=options)
         info = dict(info)
         info["scenario"] = str(path)
+        info["episode_seed"] = self.episode_seed = sub_seed
         return obs, info
 
     def step(self, action: Any) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
@@ -419,11 +431,15 @@ def make_env(
     base: R4Config | None = None,
     order: Literal["random", "cycle"] = "random",
     monitor: bool = True,
+    train_seeds: tuple[int, int] | None = None,
 ) -> gym.Env[Any, Any]:
     """A learner's env over `scenarios`: sampler → (shaped reward) → normalised actions → policy
-    observation (→ SB3 `Monitor`, which records episode returns and lengths)."""
+    observation (→ SB3 `Monitor`, which records episode returns and lengths). `train_seeds`:
+    see `SuiteEnv` (training passes `splits.Split.train_seeds`)."""
     config = config or WrapperConfig()
-    env: gym.Env[Any, Any] = SuiteEnv(scenarios, config.env_config(base), order=order)
+    env: gym.Env[Any, Any] = SuiteEnv(
+        scenarios, config.env_config(base), order=order, train_seeds=train_seeds
+    )
     if config.reward == "shaped":
         env = ShapedReward(env, config.shaping)
     env = NormalizedActions(env, config)

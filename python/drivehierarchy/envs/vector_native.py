@@ -15,6 +15,12 @@ single env draws it. `info` is batched as Gymnasium batches it (arrays + `_key` 
 that a `None` value counts as absent (see `drop_none`). `reset(options={"scenario": ...})`
 switches the scenario of every env (a str) or of each env (a list of N, `None` keeps one).
 
+`autoreset_mode=AutoresetMode.DISABLED` leaves terminated envs alone until the caller resets
+them, and `reset(options={"reset_mask": mask})` resets only the envs where `mask` is True (the
+others keep their episode; `info` holds the reset envs only), as Gymnasium 1.x's vector API
+defines it — what an SB3 `VecEnv` built on it (`baselines.vec_sb3`) needs. `env_infos` holds
+the last call's per-env info dicts unbatched (`None` for envs the call left alone).
+
 SUMO traffic is refused (each world would need its own SUMO process): pass `traffic="idm"`
 for the Rust IDM traffic, or use `envs.traffic.sumo_vector_env` (docs/baselines.md).
 """
@@ -86,6 +92,7 @@ class DriveHierarchyR4VectorEnv(VectorEnv[dict[str, Any], np.ndarray, np.ndarray
         render_mode: str | None = None,
         *,
         threads: int = 0,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         **overrides: Any,
     ) -> None:
         if not isinstance(num_envs, int) or isinstance(num_envs, bool) or num_envs < 1:
@@ -97,6 +104,16 @@ class DriveHierarchyR4VectorEnv(VectorEnv[dict[str, Any], np.ndarray, np.ndarray
                 f"config `render_mode` = {render_mode!r}: the native vector env does not render; "
                 "add front/bev images to the observation instead"
             )
+        try:
+            mode = AutoresetMode(autoreset_mode)
+        except ValueError:
+            mode = None
+        if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.DISABLED):
+            raise ConfigError(
+                f"config `autoreset_mode` = {autoreset_mode!r}: expected AutoresetMode.NEXT_STEP or DISABLED"
+            )
+        self.autoreset_mode = mode
+        self.metadata = {**type(self).metadata, "autoreset_mode": mode}
         if isinstance(config, dict):
             config = R4Config.from_dict(config)
         config = config or R4Config()
@@ -116,6 +133,8 @@ class DriveHierarchyR4VectorEnv(VectorEnv[dict[str, Any], np.ndarray, np.ndarray
         self._keys = tuple(self.single_observation_space.spaces)
         self._rngs: list[np.random.Generator | None] = [None] * num_envs
         self._autoreset = np.zeros(num_envs, dtype=np.bool_)
+        self._obs: dict[str, Any] | None = None
+        self.env_infos: list[dict[str, Any] | None] = [None] * num_envs
         self._live = False
         self._closed_batch = False
 
@@ -152,24 +171,51 @@ class DriveHierarchyR4VectorEnv(VectorEnv[dict[str, Any], np.ndarray, np.ndarray
                 )
         options = dict(options or {})
         scenario = options.pop("scenario", None)
+        mask = options.pop("reset_mask", None)
         if options:
             key = sorted(options)[0]
             raise ConfigError(
                 f"config `options.{key}` = {options[key]!r}: unknown reset option of the native "
-                "vector env (known: scenario; every env resets together, so no reset_mask)"
+                "vector env (known: scenario, reset_mask)"
             )
+        if mask is not None:
+            if not (
+                isinstance(mask, np.ndarray) and mask.dtype == np.bool_ and mask.shape == (self.num_envs,)
+            ):
+                raise ConfigError(
+                    f"config `options.reset_mask` = {mask!r}: expected a bool numpy array of shape "
+                    f"({self.num_envs},)"
+                )
+            if not mask.any():
+                raise ConfigError(f"config `options.reset_mask` = {mask!r}: resets no env (all False)")
+            if not self._live and not mask.all():
+                raise gym.error.ResetNeeded("reset_mask before a first full reset(): reset every env first")
+        else:
+            mask = np.ones(self.num_envs, dtype=np.bool_)
         if scenario is not None:
             for i, s in enumerate(self._per_env("options.scenario", scenario, self.num_envs)):
-                if s is not None:
+                if s is not None and mask[i]:
                     path = resolve_scenario(str(s))
                     if path != self._paths[i]:
                         self._batch.load(i, path)
                         self._paths[i] = path
-        resets = [self._draw(i, s) for i, s in enumerate(seeds)]
-        obs, _, _, infos = self._batch.run(resets)
-        self._autoreset[:] = False
+        if mask.all():
+            resets = [self._draw(i, s) for i, s in enumerate(seeds)]
+            obs, _, _, infos = self._batch.run(resets)
+            self._obs = self._shape_obs(obs)
+            self.env_infos = list(infos)
+        else:
+            assert self._obs is not None
+            resets_some = [self._draw(i, s) if mask[i] else None for i, s in enumerate(seeds)]
+            part, infos = self._batch.reset_some(resets_some)
+            rows = np.flatnonzero(mask)
+            self._obs = self._scatter(self._obs, self._shape_obs(part), rows)
+            self.env_infos = [None] * self.num_envs
+            for row, info in zip(rows.tolist(), infos, strict=True):
+                self.env_infos[row] = info
+        self._autoreset[mask] = False
         self._live = True
-        return self._shape_obs(obs), self._batch_infos(infos)
+        return self._obs, self._batch_infos(self.env_infos)
 
     def step(
         self, actions: np.ndarray
@@ -181,6 +227,12 @@ class DriveHierarchyR4VectorEnv(VectorEnv[dict[str, Any], np.ndarray, np.ndarray
         expected = self.action_space.shape
         if arr.shape != expected:
             raise ConfigError(f"config `actions` = {actions!r}: expected shape {expected}, got {arr.shape}")
+        if self.autoreset_mode == AutoresetMode.DISABLED and self._autoreset.any():
+            done = int(np.flatnonzero(self._autoreset)[0])
+            raise gym.error.ResetNeeded(
+                f"env {done} terminated and autoreset_mode is DISABLED: reset it first "
+                "(reset(options={'reset_mask': mask}))"
+            )
         # Envs that autoreset ignore their action, as in SyncVectorEnv.
         stepping = ~self._autoreset
         if not np.all(np.isfinite(arr[stepping])):
@@ -190,7 +242,9 @@ class DriveHierarchyR4VectorEnv(VectorEnv[dict[str, Any], np.ndarray, np.ndarray
         obs, rewards, terminated, infos = self._batch.run(resets, np.ascontiguousarray(arr))
         truncated = np.zeros(self.num_envs, dtype=np.bool_)
         self._autoreset = terminated.copy()
-        return self._shape_obs(obs), rewards, terminated, truncated, self._batch_infos(infos)
+        self._obs = self._shape_obs(obs)
+        self.env_infos = list(infos)
+        return self._obs, rewards, terminated, truncated, self._batch_infos(infos)
 
     def close_extras(self, **kwargs: Any) -> None:
         self._batch = None
@@ -213,10 +267,27 @@ class DriveHierarchyR4VectorEnv(VectorEnv[dict[str, Any], np.ndarray, np.ndarray
     def _shape_obs(self, raw: dict[str, Any]) -> dict[str, Any]:
         return {key: raw[key] for key in self._keys}
 
-    def _batch_infos(self, infos: list[dict[str, Any]]) -> dict[str, Any]:
+    def _batch_infos(self, infos: Sequence[dict[str, Any] | None]) -> dict[str, Any]:
         out: dict[str, Any] = {}
         for i, info in enumerate(infos):
-            out = self._add_info(out, drop_none(info), i)
+            if info is not None:
+                out = self._add_info(out, drop_none(info), i)
+        return out
+
+    @staticmethod
+    def _scatter(old: dict[str, Any], part: dict[str, Any], rows: np.ndarray) -> dict[str, Any]:
+        """`old` with rows `rows` replaced by `part`'s (new arrays: returned batches stay valid)."""
+        out: dict[str, Any] = {}
+        for key, value in old.items():
+            if isinstance(value, tuple):  # prompt: a tuple of N str
+                items = list(value)
+                for j, i in enumerate(rows):
+                    items[int(i)] = part[key][j]
+                out[key] = tuple(items)
+            else:
+                arr = value.copy()
+                arr[rows] = part[key]
+                out[key] = arr
         return out
 
     def _check_open(self, what: str) -> None:
