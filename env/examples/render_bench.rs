@@ -92,6 +92,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             lights: &[],
             signs: &[],
             route_points: &route[k],
+            ambience: Default::default(),
         };
         let mut r = Renderer::new();
         let (mut a, mut b) = (Image::default(), Image::default());
