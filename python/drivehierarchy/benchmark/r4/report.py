@@ -12,6 +12,7 @@ import csv
 import io
 import json
 import re
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -106,6 +107,24 @@ def write_run_tables(out: Path, summary: dict[str, Any], model: str) -> None:
     (out / "r4_summary.csv").write_text(r4_summary_csv(runs), encoding="utf-8")
 
 
+# How each robustness control reads in a row label, in this order.
+_CONTROL_LABELS: dict[str, Callable[[Any], str]] = {
+    "blind": lambda v: "--blind",
+    "no_bev": lambda v: "--no-bev",
+    "corrupt": lambda v: f"--corrupt {v}",
+    "latency_aware": lambda v: "--latency-aware",
+    "conditions": lambda v: f"--conditions {v}",
+    "camera_fault": lambda v: f"--camera-fault {v}",
+}
+
+
+def row_label(model: str, controls: dict[str, Any] | None) -> str:
+    """A run's row name: the model, plus the controls it ran with (`qwen (--conditions night)`),
+    so a control run is its own row beside the plain run of the same model."""
+    parts = [f(controls[k]) for k, f in _CONTROL_LABELS.items() if controls and controls.get(k)]
+    return f"{model} ({', '.join(parts)})" if parts else model
+
+
 def read_run(run: Path) -> tuple[str, dict[str, Any]]:
     path = run / "summary.json"
     if not run.exists():
@@ -115,7 +134,7 @@ def read_run(run: Path) -> tuple[str, dict[str, Any]]:
     summary = json.loads(path.read_text(encoding="utf-8"))
     if not summary.get("categories"):
         raise ConfigError(f"{path}: field `categories` is empty: nothing to report")
-    return str(summary.get("model") or run.name), summary
+    return row_label(str(summary.get("model") or run.name), summary.get("controls")), summary
 
 
 def paper_runs(models: list[str]) -> list[tuple[str, dict[str, Any]]]:
@@ -177,9 +196,12 @@ def build_report(run_dirs: list[Path], out: Path, *, paper: bool = False, plot: 
     runs = [read_run(r) for r in run_dirs]
     names = [n for n, _ in runs]
     if len(set(names)) != len(names):
-        raise ConfigError(f"r4 report: two runs report the same model name ({names}); one row per model")
+        raise ConfigError(
+            f"r4 report: two runs report the same model and controls ({names}); one row per model and control"
+        )
     out.mkdir(parents=True, exist_ok=True)
-    table_runs = runs + (paper_runs(names) if paper else [])
+    models = list(dict.fromkeys(str(s.get("model") or n) for n, s in runs))
+    table_runs = runs + (paper_runs(models) if paper else [])
     written = []
     for name, text in (
         ("table2.md", table_markdown(table_runs)),

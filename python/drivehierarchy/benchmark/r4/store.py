@@ -126,6 +126,7 @@ def write_manifest(out: Path, jobs: list[Job], opts: RunOptions) -> None:
         "seeds": opts.seed_list(),
         "identity": opts.identity(),
         "vlm": opts.vlm.manifest() if opts.vlm is not None else None,
+        "controls": opts.controls(),
         "jobs": opts.jobs,
         "ray_address": opts.ray_address,
         "config": opts.config.to_core(),

@@ -67,7 +67,11 @@ def summarize(results: list[dict[str, Any]], failed: list[str] | None = None) ->
 
 
 def write_summary(
-    out: Path, results: list[dict[str, Any]], model: str | None = None, failed: list[str] | None = None
+    out: Path,
+    results: list[dict[str, Any]],
+    model: str | None = None,
+    failed: list[str] | None = None,
+    controls: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     from drivehierarchy.benchmark.r4 import report
 
@@ -76,6 +80,8 @@ def write_summary(
     summary = summarize(results, failed)
     if model is not None:
         summary["model"] = model
+    if controls:
+        summary["controls"] = controls
     write_json_atomic(out / "summary.json", summary)
     rows = [
         "scenario,category,seed,status,termination_reason,score_route,score_safety,score_efficiency,"
@@ -89,7 +95,7 @@ def write_summary(
         )
     write_text_atomic(out / "summary.csv", "\n".join(rows) + "\n")
     write_text_atomic(out / "summary.md", summary_table(results, summary))
-    report.write_run_tables(out, summary, model or "model")
+    report.write_run_tables(out, summary, report.row_label(model or "model", controls))
     return summary
 
 
