@@ -1,6 +1,7 @@
 //! The conditions gallery of docs/rendering.md: one town01 scene (a lead car braking, oncoming
 //! traffic, a pedestrian at the kerb, a junction ahead) under every time of day and weather, as
-//! the protocol's 800×450 front camera and 800×800 BEV, plus the dirty-lens camera fault.
+//! the protocol's 800×450 front camera, plus the dirty-lens camera fault and the BEV (which every
+//! condition draws alike; the example checks that).
 //!
 //! `cargo run --release -p dh-env --example render_conditions -- scenarios/maps/town01/town01.net.xml docs/gallery/conditions`
 //!
@@ -54,7 +55,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let actors = [lead, oncoming, van, walker];
 
     let names = ["noon", "dusk", "night", "overcast", "rain", "fog", "night+rain", "dusk+fog"];
-    let mut md = vec!["| conditions | front camera | BEV |".to_owned(), "|---|---|---|".to_owned()];
+    let mut md = vec!["| conditions | front camera |".to_owned(), "|---|---|".to_owned()];
+    let mut bev0: Option<Image> = None;
     let (mut front, mut bev) = (Image::default(), Image::default());
     for name in names {
         let conditions = Conditions::parse(name)?;
@@ -65,10 +67,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         render_bev(&map, &frame, &BevConfig::default(), &mut bev)?;
         let file = name.replace('+', "_");
         front.save(dir.join(format!("{file}.png")))?;
-        bev.save(dir.join(format!("{file}_bev.png")))?;
-        md.push(format!(
-            "| `{name}` | ![{name}](gallery/conditions/{file}.png) | ![{name} BEV](gallery/conditions/{file}_bev.png) |"
-        ));
+        match &bev0 {
+            None => {
+                bev.save(dir.join("bev.png"))?;
+                bev0 = Some(bev.clone());
+            }
+            Some(b) if b.data != bev.data => {
+                return Err(format!("{name}: the BEV differs from noon's").into())
+            }
+            Some(_) => {}
+        }
+        md.push(format!("| `{name}` | ![{name}](gallery/conditions/{file}.png) |"));
     }
     let frame = FrameInput {
         ego: &ego,
@@ -83,6 +92,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     front.save(dir.join("fault_dirty.png"))?;
     md.push(String::new());
     md.push("Camera fault `dirty` (seed 7): ![dirty lens](gallery/conditions/fault_dirty.png)".to_owned());
+    md.push(String::new());
+    md.push(
+        "The BEV of this scene, the same under every condition: ![BEV](gallery/conditions/bev.png)"
+            .to_owned(),
+    );
     println!("{}", md.join("\n"));
     Ok(())
 }

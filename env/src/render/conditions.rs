@@ -214,10 +214,14 @@ fn smoothstep(e0: f32, e1: f32, x: f32) -> f32 {
 }
 
 const HEADLAMP_REACH_M: f32 = 42.0;
+/// Vehicles whose head lamps light the ground in one frame (the ego included).
+const MAX_BEAMS: usize = 8;
 const HEADLAMP: [f32; 3] = [1.0, 0.97, 0.86];
 const STREET_LAMP: [f32; 3] = [1.0, 0.82, 0.55];
 /// Radius of a street light's pool on the ground, m.
 const POOL_M: f32 = 11.0;
+/// Street lights farther than this from the camera are not drawn (their pools are specks), m.
+const STREET_LIGHTS_M: f32 = 100.0;
 /// Height of a street light's head, m.
 pub(crate) const LAMP_HEAD_M: f32 = 7.0;
 
@@ -225,14 +229,15 @@ fn has_headlamps(a: &ActorView) -> bool {
     matches!(a.kind, ActorKind::Car | ActorKind::Bus | ActorKind::Truck | ActorKind::Motorcycle)
 }
 
-/// Draws a ground quad (map frame, z = 0) through `b.light_convex`, `shade(px, g)` lighting each
-/// covered pixel from its ground point `g`.
-fn ground_light<B: RasterBackend>(
+/// Draws a ground quad (map frame, z = 0) through `b.light_convex`: `shade(row, g0, step)`
+/// lights one covered run of pixels whose ground points are `g0 + i · step` (flat ground, no
+/// roll: linear along a row).
+fn ground_light<B: RasterBackend, F: Fn(&mut [u8], [f32; 2], [f32; 2])>(
     eye: &impl Eye,
     b: &mut B,
     quad: [[f32; 2]; 4],
     poly: &mut [SV; 4],
-    shade: &dyn Fn(&mut [u8], [f32; 2]),
+    shade: F,
 ) {
     let q = quad.map(|p| eye.to_cam([p[0], p[1], 0.0]));
     let cam = eye.basis();
@@ -244,24 +249,34 @@ fn ground_light<B: RasterBackend>(
         let n = eye.clip_project(tri, poly);
         b.light_convex(&poly[..n], &mut |y, x0, row| {
             let yc = (y as f32 + 0.5 - cy) / fx;
-            // No roll: the ray's height slope is constant along a row, the ground point linear in x.
             let d0 = ray(&cam, (x0 as f32 + 0.5 - cx) / fx, yc);
             if d0[2] >= -1e-4 {
                 return;
             }
             let t = -pos[2] / d0[2];
-            let (gx0, gy0) = (pos[0] + t * d0[0], pos[1] + t * d0[1]);
-            let (sx, sy) = (t * cam.r[0] / fx, t * cam.r[1] / fx);
-            for (i, px) in row.chunks_exact_mut(3).enumerate() {
-                let i = i as f32;
-                shade(px, [gx0 + sx * i, gy0 + sy * i]);
-            }
+            let g0 = [pos[0] + t * d0[0], pos[1] + t * d0[1]];
+            shade(row, g0, [t * cam.r[0] / fx, t * cam.r[1] / fx]);
         });
     }
 }
 
+/// The index range [lo, hi) of `0..n` where `a + b·i > 0` holds, intersected with `range`.
+#[inline(always)]
+fn keep_positive(range: (f32, f32), a: f32, b: f32) -> (f32, f32) {
+    if b.abs() < 1e-9 {
+        return if a > 0.0 { range } else { (0.0, 0.0) };
+    }
+    let root = -a / b;
+    if b > 0.0 {
+        (range.0.max(root), range.1)
+    } else {
+        (range.0, range.1.min(root))
+    }
+}
+
 /// Night: the pools of light on the ground from every vehicle's head lamps (the ego's too) and
-/// from the street lights near the camera. Drawn over the ground, under everything standing.
+/// from the street lights near the camera. Drawn over the ground, under everything standing;
+/// each run of pixels is first cut to where its light is non-zero.
 pub(crate) fn light_pools<B: RasterBackend>(
     eye: &impl Eye,
     map: &RenderMap,
@@ -271,42 +286,80 @@ pub(crate) fn light_pools<B: RasterBackend>(
     poly: &mut [SV; 4],
 ) {
     let cam = eye.basis();
-    let far2 = (cam.far + HEADLAMP_REACH_M).powi(2);
-    for a in std::iter::once(ego).chain(actors.iter().filter(|a| !(a.id == ego.id && a.pose == ego.pose))) {
+    let reach = HEADLAMP_REACH_M;
+    // Brightness along the beam by distance from the lamps, in 64 steps over the reach.
+    let mut along = [0f32; 65];
+    for (i, v) in along.iter_mut().enumerate() {
+        let u = reach * i as f32 / 64.0;
+        *v = 0.8 * smoothstep(0.0, 9.0, u) / (1.0 + (u / 22.0).powi(2))
+            * (1.0 - smoothstep(0.6 * reach, reach, u));
+    }
+    // The ego and the MAX_BEAMS - 1 nearest other vehicles light the ground (a bound on the cost
+    // in dense traffic; the others' lamps still burn). Chosen by distance, then index: stable.
+    let mut near = [(f32::INFINITY, usize::MAX); MAX_BEAMS];
+    near[0] = (0.0, usize::MAX - 1);
+    for (i, a) in actors.iter().enumerate() {
+        if !has_headlamps(a) || (a.id == ego.id && a.pose == ego.pose) {
+            continue;
+        }
+        let p = a.pose.pos - map.origin;
+        let d2 = (p.x as f32 - cam.pos[0]).powi(2) + (p.y as f32 - cam.pos[1]).powi(2);
+        if d2 > (cam.far + reach).powi(2) || d2 >= near[MAX_BEAMS - 1].0 {
+            continue;
+        }
+        let mut k = MAX_BEAMS - 1;
+        while k > 1 && near[k - 1].0 > d2 {
+            near[k] = near[k - 1];
+            k -= 1;
+        }
+        near[k] = (d2, i);
+    }
+    for &(_, i) in &near {
+        let a = match i {
+            usize::MAX => continue,
+            i if i == usize::MAX - 1 => ego,
+            i => &actors[i],
+        };
         if !has_headlamps(a) {
             continue;
         }
         let p = a.pose.pos - map.origin;
         let (ax, ay) = (p.x as f32, p.y as f32);
-        if (ax - cam.pos[0]).powi(2) + (ay - cam.pos[1]).powi(2) > far2 {
-            continue;
-        }
         let (l, w, _) = mesh::actor_dims(a);
         let (s, c) = a.pose.yaw.sin_cos();
         let (f, lft) = ([c as f32, s as f32], [-s as f32, c as f32]);
         let (hl, hw) = (l * 0.5, w * 0.5);
-        let at = |u: f32, v: f32| [ax + f[0] * (hl + u) + lft[0] * v, ay + f[1] * (hl + u) + lft[1] * v];
-        let spread = 0.42;
-        let reach = HEADLAMP_REACH_M;
+        let base = [ax + f[0] * hl, ay + f[1] * hl];
+        let at = |u: f32, v: f32| [base[0] + f[0] * u + lft[0] * v, base[1] + f[1] * u + lft[1] * v];
+        let spread = 0.32;
         let quad =
             [at(0.0, hw), at(0.0, -hw), at(reach, -(hw + reach * spread)), at(reach, hw + reach * spread)];
-        let shade = |px: &mut [u8], g: [f32; 2]| {
-            let (gx, gy) = (g[0] - (ax + f[0] * hl), g[1] - (ay + f[1] * hl));
-            let u = gx * f[0] + gy * f[1];
-            if u <= 0.0 {
-                return;
+        let shade = |row: &mut [u8], g0: [f32; 2], st: [f32; 2]| {
+            // Beam coordinates along the run: u ahead of the lamps, v to the left, both linear.
+            let (gx, gy) = (g0[0] - base[0], g0[1] - base[1]);
+            let (u0, du) = (gx * f[0] + gy * f[1], st[0] * f[0] + st[1] * f[1]);
+            let (v0, dv) = (gx * lft[0] + gy * lft[1], st[0] * lft[0] + st[1] * lft[1]);
+            let mut r = (0.0, (row.len() / 3) as f32);
+            r = keep_positive(r, u0, du);
+            r = keep_positive(r, reach - u0, -du);
+            r = keep_positive(r, hw + spread * u0 - v0, spread * du - dv);
+            r = keep_positive(r, hw + spread * u0 + v0, spread * du + dv);
+            let (lo, hi) = (r.0.max(0.0).ceil() as usize, (r.1.max(0.0).ceil() as usize).min(row.len() / 3));
+            for i in lo..hi {
+                let fi = i as f32;
+                let (u, v) = (u0 + du * fi, (v0 + dv * fi).abs());
+                let edge = hw + u * spread;
+                let across = 1.0 - smoothstep(0.55, 1.0, v / edge);
+                // Linear between table steps (a step is 0.66 m: bands would show near the car).
+                let t = (u / reach * 64.0).clamp(0.0, 63.999);
+                let (k, fr) = (t as usize, t.fract());
+                let l = (along[k] + (along[k + 1] - along[k]) * fr) * across;
+                add_light(&mut row[i * 3..i * 3 + 3], l, HEADLAMP);
             }
-            let v = (gx * lft[0] + gy * lft[1]).abs();
-            let edge = hw + u * spread;
-            let across = 1.0 - smoothstep(0.55, 1.0, v / edge);
-            // Low beams: brightest 8-20 m ahead, fading out before the quad's far end.
-            let along = smoothstep(0.0, 9.0, u) / (1.0 + (u / 22.0).powi(2))
-                * (1.0 - smoothstep(0.6 * HEADLAMP_REACH_M, HEADLAMP_REACH_M, u));
-            add_light(px, 0.8 * across * along, HEADLAMP);
         };
-        ground_light(eye, b, quad, poly, &shade);
+        ground_light(eye, b, quad, poly, shade);
     }
-    let r2 = (cam.far * 0.6).powi(2);
+    let r2 = STREET_LIGHTS_M * STREET_LIGHTS_M;
     for lamp in &map.street_lamps {
         let (x, y) = (lamp[0], lamp[1]);
         if (x - cam.pos[0]).powi(2) + (y - cam.pos[1]).powi(2) > r2 {
@@ -318,19 +371,35 @@ pub(crate) fn light_pools<B: RasterBackend>(
             [x + POOL_M, y + POOL_M],
             [x - POOL_M, y + POOL_M],
         ];
-        let shade = |px: &mut [u8], g: [f32; 2]| {
-            let d2 = ((g[0] - x).powi(2) + (g[1] - y).powi(2)) / (POOL_M * POOL_M);
-            if d2 < 1.0 {
-                add_light(px, 0.55 * (1.0 - d2) * (1.0 - d2), STREET_LAMP);
+        let shade = |row: &mut [u8], g0: [f32; 2], st: [f32; 2]| {
+            // |g0 + i·st − centre|² < R²: a quadratic in i; light only between its roots.
+            let (px, py) = (g0[0] - x, g0[1] - y);
+            let qa = st[0] * st[0] + st[1] * st[1];
+            let qb = 2.0 * (px * st[0] + py * st[1]);
+            let qc = px * px + py * py - POOL_M * POOL_M;
+            let disc = qb * qb - 4.0 * qa * qc;
+            if qa <= 0.0 || disc <= 0.0 {
+                return;
+            }
+            let sq = disc.sqrt();
+            let n = row.len() / 3;
+            let lo = ((-qb - sq) / (2.0 * qa)).max(0.0).ceil() as usize;
+            let hi = (((-qb + sq) / (2.0 * qa)).max(0.0).ceil() as usize).min(n);
+            for i in lo..hi {
+                let fi = i as f32;
+                let d2 = ((px + st[0] * fi).powi(2) + (py + st[1] * fi).powi(2)) / (POOL_M * POOL_M);
+                if d2 < 1.0 {
+                    add_light(&mut row[i * 3..i * 3 + 3], 0.55 * (1.0 - d2) * (1.0 - d2), STREET_LAMP);
+                }
             }
         };
-        ground_light(eye, b, quad, poly, &shade);
+        ground_light(eye, b, quad, poly, shade);
     }
 }
 
 /// Night: street-light poles with a burning head over the road, near the camera.
 pub(crate) fn street_lamp_tris(cam: &Basis, map: &RenderMap, out: &mut Vec<Tri3>) {
-    let r2 = (cam.far * 0.6).powi(2);
+    let r2 = STREET_LIGHTS_M * STREET_LIGHTS_M;
     for lamp in &map.street_lamps {
         let (x, y) = (lamp[0], lamp[1]);
         if (x - cam.pos[0]).powi(2) + (y - cam.pos[1]).powi(2) > r2 {
@@ -356,44 +425,62 @@ pub(crate) fn street_lamp_tris(cam: &Basis, map: &RenderMap, out: &mut Vec<Tri3>
 }
 
 /// Per-pixel fog and wet-ground sheen over a finished camera frame, from its depth plane
-/// (ground layers leave depth empty; their distance follows from the row).
+/// (ground layers leave depth empty; their distance follows from the row). Distances are taken
+/// along the row's centre ray (the cosine of the horizontal angle is dropped), so ground and sky
+/// blends are one constant per row and faces read one table: about a nanosecond a pixel.
 pub(crate) fn post(look: &Look, cam: &Basis, rgb: &mut [u8], depth: &[f32], w: usize, h: usize) {
     if look.haze_m.is_none() && !look.wet {
         return;
     }
-    let fog = look.fog;
-    let refl = look.horizon;
+    let fog = look.fog.map(|v| v as i32);
+    let refl = look.horizon.map(|v| v as i32);
     let inv_vis = look.haze_m.map_or(0.0, |v| 1.0 / v);
+    // Fog of a face by its distance in units of visibility / 32.
+    const STEPS: f32 = 32.0;
+    let mut lut = [0i32; 257];
+    for (i, k) in lut.iter_mut().enumerate() {
+        *k = ((1.0 - (-(i as f32) / STEPS).exp()) * 256.0) as i32;
+    }
+    lut[256] = 256;
+    let blend = |px: &mut [u8], to: [i32; 3], k: i32| {
+        for c in 0..3 {
+            let v = px[c] as i32;
+            px[c] = (v + (((to[c] - v) * k) >> 8)) as u8;
+        }
+    };
     for y in 0..h {
         let yc = (y as f32 + 0.5 - cam.cy) / cam.fx;
-        for x in 0..w {
-            let i = y * w + x;
-            let xc = (x as f32 + 0.5 - cam.cx) / cam.fx;
-            let d = ray(cam, xc, yc);
-            let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-            let z = depth.get(i).copied().unwrap_or(0.0);
-            let ground = z <= 0.0 && d[2] < 0.0;
-            let dist = if z > 0.0 {
-                len / z
-            } else if ground {
-                -cam.pos[2] / d[2] * len
-            } else {
-                f32::INFINITY
-            };
-            let px = &mut rgb[i * 3..i * 3 + 3];
-            if look.wet && ground {
-                // Fresnel-like: the flatter the view onto the wet ground, the more sky it mirrors.
-                let s = -d[2] / len;
-                let k = 0.6 * (1.0 - s / 0.32).clamp(0.0, 1.0).powi(2);
-                for c in 0..3 {
-                    px[c] = (px[c] as f32 + (refl[c] - px[c] as f32) * k) as u8;
+        let d2 = cam.d[2] * yc + cam.f[2];
+        let len = (1.0 + yc * yc).sqrt();
+        // Depth-0 pixels of this row: ground below the horizon, sky above.
+        let (ground, z_ground) = (d2 < -1e-5, -cam.pos[2] / d2.min(-1e-5));
+        let k_wet = if look.wet && ground {
+            // Fresnel-like: the flatter the view onto the wet ground, the more sky it mirrors.
+            (0.6 * (1.0 - (-d2 / len) / 0.32).clamp(0.0, 1.0).powi(2) * 256.0) as i32
+        } else {
+            0
+        };
+        let k_empty = if inv_vis == 0.0 {
+            0
+        } else if ground {
+            lut[((z_ground * len * inv_vis * STEPS) as usize).min(256)]
+        } else {
+            256
+        };
+        let row = &mut rgb[y * w * 3..(y + 1) * w * 3];
+        let drow = if depth.is_empty() { None } else { Some(&depth[y * w..(y + 1) * w]) };
+        for (x, px) in row.chunks_exact_mut(3).enumerate() {
+            let z = drow.map_or(0.0, |d| d[x]);
+            if z <= 0.0 {
+                if k_wet > 0 {
+                    blend(px, refl, k_wet);
                 }
-            }
-            if inv_vis > 0.0 {
-                let k = if dist.is_finite() { 1.0 - (-dist * inv_vis).exp() } else { 1.0 };
-                for c in 0..3 {
-                    px[c] = (px[c] as f32 + (fog[c] - px[c] as f32) * k) as u8;
+                if k_empty > 0 {
+                    blend(px, fog, k_empty);
                 }
+            } else if inv_vis > 0.0 {
+                let k = lut[((len / z * inv_vis * STEPS) as usize).min(256)];
+                blend(px, fog, k);
             }
         }
     }
