@@ -45,6 +45,8 @@ EDITOR_KEYS = [
     "chain_events",
     "depart_lanes",
     "depart_speeds",
+    "times_of_day",
+    "weathers",
     "vclass_of",
     "actor_keys",
     "start_triggers",
