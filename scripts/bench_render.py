@@ -131,14 +131,16 @@ def drive_to_mid_episode(scenario: str, decisions: int) -> tuple[Any, Any, int]:
     return env, env.sim, done
 
 
-def bench_decisions(seconds: float) -> Rate:
-    """R4 decisions/s with the protocol's front camera and BEV rendered at every decision."""
+def bench_decisions(seconds: float, conditions: str | None = None) -> Rate:
+    """R4 decisions/s with the protocol's front camera and BEV rendered at every decision, under
+    the scenario's conditions or the `conditions` override."""
     import gymnasium as gym
 
     from drivehierarchy.scenarios import builtin_root
 
     scenario = str(builtin_root() / "bench" / "town01_30_actors.toml")
-    env = gym.make("DriveHierarchy-R4", scenario=scenario).unwrapped
+    extra = {} if conditions is None else {"conditions": conditions}
+    env = gym.make("DriveHierarchy-R4", scenario=scenario, **extra).unwrapped
     env.reset(seed=0)
     seed = [0]
 
@@ -298,6 +300,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="smoke run (CI): 0.1 s per measurement")
     ap.add_argument("--baseline", help="directory holding another build's drivehierarchy package")
     ap.add_argument("--rounds", type=int, default=2, help="alternating rounds with --baseline")
+    ap.add_argument(
+        "--conditions",
+        default="night,rain,fog",
+        help="also measure decisions/s under these conditions overrides, comma-separated "
+        "(default night,rain,fog; '' for none)",
+    )
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.quick:
@@ -320,6 +328,7 @@ def main(argv: list[str] | None = None) -> int:
     results["builtin"] = bench_sim(sim, args.seconds)
     env.close()
     decisions = bench_decisions(args.seconds)
+    by_conditions = {c: bench_decisions(args.seconds, c) for c in args.conditions.split(",") if c}
 
     with tempfile.TemporaryDirectory() as tmp:
         path = tongji_scenario(Path(tmp))
@@ -346,6 +355,8 @@ def main(argv: list[str] | None = None) -> int:
         print(row("800×450", peer))
     print("R4 — town01_30_actors, expert")
     print(row("decisions/s, front 800×450 + BEV 800×800", decisions, DECISIONS_TARGET))
+    for c, r in by_conditions.items():
+        print(row(f"  … --conditions {c}", r) + f"  ×{r.per_cpu / decisions.per_cpu:.2f} of default (CPU)")
     missed = [f"{name}/{k}" for name, r in results.items() for k, t in TARGETS.items() if r[k].per_cpu < t]
     if decisions.per_cpu < DECISIONS_TARGET:
         missed.append("decisions")

@@ -1,6 +1,6 @@
 //! Render throughput on one core: front 800×450 + BEV 800×800 pairs, front 400×225, BEV 128×128.
 //!
-//! `cargo run --release -p dh-env --example render_bench -- NET [NET...]`
+//! `cargo run --release -p dh-env --example render_bench -- NET [NET...] [--conditions=NAME]`
 //! Each net gets a drive along its longest drivable lane with 30 actors scattered around.
 
 use dh_env::geom::Pose;
@@ -11,7 +11,12 @@ use std::path::Path;
 use std::time::Instant;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let nets: Vec<String> = std::env::args().skip(1).collect();
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let conditions = match args.iter().find_map(|a| a.strip_prefix("--conditions=")) {
+        Some(n) => dh_env::conditions::Conditions::parse(n)?,
+        None => Default::default(),
+    };
+    let nets: Vec<String> = args.into_iter().filter(|a| !a.starts_with("--")).collect();
     if nets.is_empty() {
         return Err("usage: render_bench NET [NET...]".into());
     }
@@ -92,6 +97,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             lights: &[],
             signs: &[],
             route_points: &route[k],
+            ambience: dh_env::render::Ambience { conditions, seed: 0, tick: k as u64 },
         };
         let mut r = Renderer::new();
         let (mut a, mut b) = (Image::default(), Image::default());

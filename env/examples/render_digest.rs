@@ -98,8 +98,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .iter()
             .map(|d| p.local_to_world(*d, 0.5 * d * (k as f64 * 0.1).sin()))
             .collect();
-        let frame =
-            FrameInput { ego: &ego, actors: &actors, lights: &lights, signs: &signs, route_points: &route };
+        let frame = FrameInput {
+            ego: &ego,
+            actors: &actors,
+            lights: &lights,
+            signs: &signs,
+            route_points: &route,
+            ambience: Default::default(),
+        };
         let cams = [
             CameraConfig::front(),
             CameraConfig { width: 400, height: 225, supersample: 2, ..CameraConfig::front() },

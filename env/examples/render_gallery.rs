@@ -66,7 +66,14 @@ impl Shot<'_> {
         subject: Option<u32>,
         bev: bool,
     ) -> String {
-        let frame = FrameInput { ego, actors, lights: &[], signs: &[], route_points: &[] };
+        let frame = FrameInput {
+            ego,
+            actors,
+            lights: &[],
+            signs: &[],
+            route_points: &[],
+            ambience: Default::default(),
+        };
         let mut img = Image::default();
         let found = render_and_project(self.map, &frame, &CameraConfig::front(), &mut img).unwrap();
         let file = format!("{name}.png");

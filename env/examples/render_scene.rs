@@ -77,8 +77,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .iter()
         .map(|d| ego_pose.local_to_world(*d, 0.0))
         .collect();
-    let frame =
-        FrameInput { ego: &ego, actors: &actors, lights: &lights, signs: &signs, route_points: &route };
+    let frame = FrameInput {
+        ego: &ego,
+        actors: &actors,
+        lights: &lights,
+        signs: &signs,
+        route_points: &route,
+        ambience: Default::default(),
+    };
     for p in write_gallery(&map, &frame, Path::new(&args[2]), "demo", true)? {
         println!("wrote {}", p.display());
     }

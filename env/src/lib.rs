@@ -4,6 +4,7 @@
 //! action → actuation bridge → world. Scoring reads the world's event stream.
 
 pub mod batch;
+pub mod conditions;
 pub mod drive;
 pub mod error;
 pub mod geom;

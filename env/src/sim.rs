@@ -15,7 +15,7 @@ use crate::drive::{
     RouteTracker, RouteView,
 };
 use crate::geom::{wrap_angle, Pose, Vec2};
-use crate::render::{BevConfig, CameraConfig, FrameInput, Image, RenderMap};
+use crate::render::{Ambience, BevConfig, CameraConfig, FrameInput, Image, RenderMap};
 use crate::scenario::{LoadOptions, ResolvedScenario, Scenario};
 use crate::score::{
     Contact, RunFooter, RunHeader, RunInfo, RunLog, SceneScore, ScoreParams, ScoreTracker, TickInput,
@@ -55,6 +55,14 @@ pub struct SimConfig {
     pub bev: Option<BevConfig>,
     /// Build the VLM prompt text for each observation.
     pub prompt: bool,
+    /// Light and weather for every episode, overriding the scenario's `[conditions]` and its
+    /// per-seed draw (a robustness control): a name such as `night`, `fog` or `dusk+rain`
+    /// ([`crate::conditions::Conditions::parse`]). `None`: the scenario's.
+    #[serde(default)]
+    pub conditions: Option<String>,
+    /// A fault of the observation's front camera (a robustness control); `None`: none.
+    #[serde(default)]
+    pub camera_fault: Option<crate::render::CameraFault>,
 }
 
 impl Default for SimConfig {
@@ -66,6 +74,8 @@ impl Default for SimConfig {
             front: Some(CameraConfig::default()),
             bev: Some(BevConfig::default()),
             prompt: true,
+            conditions: None,
+            camera_fault: None,
         }
     }
 }
@@ -94,7 +104,20 @@ impl SimConfig {
         if let Some(b) = &self.bev {
             b.validate()?;
         }
+        self.conditions_override()?;
         Ok(())
+    }
+}
+
+impl SimConfig {
+    /// The parsed `conditions` override.
+    pub fn conditions_override(&self) -> Result<Option<crate::conditions::Conditions>> {
+        match &self.conditions {
+            None => Ok(None),
+            Some(n) => crate::conditions::Conditions::parse(n)
+                .map(Some)
+                .map_err(|e| Error::config("conditions", n, e)),
+        }
     }
 }
 
@@ -298,6 +321,17 @@ struct Episode {
     /// The terminal step has been returned to the caller (an episode can end during warm-up;
     /// the first `step` then reports it without ticking).
     terminal_reported: bool,
+    /// Light and weather of this episode.
+    conditions: crate::conditions::Conditions,
+    /// The front image the camera-fault control last delivered (frozen and dropped frames
+    /// repeat it); behind a lock because observing does not change the episode otherwise.
+    fault_frame: std::sync::Mutex<Option<Image>>,
+}
+
+impl Episode {
+    fn ambience(&self) -> Ambience {
+        Ambience { conditions: self.conditions, seed: self.seed, tick: self.world.tick_count() }
+    }
 }
 
 impl Sim {
@@ -354,6 +388,7 @@ impl Sim {
     /// varied by `variation` ([`ResolvedScenario::varied`]; 0 = as written).
     pub fn reset_varied(&mut self, seed: u64, variation: u64) -> Result<(Observation, StepInfo)> {
         let scenario = self.scenario.varied(variation);
+        let conditions = self.config.conditions_override()?.unwrap_or(scenario.conditions);
         let mut world = World::new(&scenario, seed)?;
         world.set_variation_seed(variation);
         self.start_traffic(&mut world)?;
@@ -387,6 +422,8 @@ impl Sim {
             started: Instant::now(),
             terminated: false,
             terminal_reported: false,
+            conditions,
+            fault_frame: std::sync::Mutex::new(None),
         });
         let warmup = self.config.warmup_ticks;
         if warmup > 0 {
@@ -572,7 +609,7 @@ impl Sim {
         let ep = self.episode.as_ref().ok_or_else(not_started)?;
         let map = self.render_map_or_build();
         let route_pts = self.route_points_world(&ep.world.ego().pose);
-        let frame = frame_input(&ep.world, &route_pts);
+        let frame = frame_input(ep, &route_pts);
         crate::render::render_camera(&map, &frame, cfg, out)
     }
 
@@ -581,7 +618,7 @@ impl Sim {
         let ep = self.episode.as_ref().ok_or_else(not_started)?;
         let map = self.render_map_or_build();
         let route_pts = self.route_points_world(&ep.world.ego().pose);
-        let frame = frame_input(&ep.world, &route_pts);
+        let frame = frame_input(ep, &route_pts);
         crate::render::render_bev(&map, &frame, cfg, out)
     }
 
@@ -590,7 +627,7 @@ impl Sim {
         let ep = self.episode.as_ref().ok_or_else(not_started)?;
         let map = self.render_map_or_build();
         let route_pts = self.route_points_world(&ep.world.ego().pose);
-        let frame = frame_input(&ep.world, &route_pts);
+        let frame = frame_input(ep, &route_pts);
         crate::render::project_actors(&map, &frame, cfg)
     }
 
@@ -603,7 +640,7 @@ impl Sim {
         let ep = self.episode.as_ref().ok_or_else(not_started)?;
         let map = self.render_map_or_build();
         let route_pts = self.route_points_world(&ep.world.ego().pose);
-        let frame = frame_input(&ep.world, &route_pts);
+        let frame = frame_input(ep, &route_pts);
         crate::render::render_and_project(&map, &frame, cfg, out)
     }
 
@@ -619,6 +656,7 @@ impl Sim {
             lights: world.lights().to_vec(),
             signs: world.signs().to_vec(),
             route_points: self.route_points_world(&world.ego().pose),
+            ambience: ep.ambience(),
         })
     }
 
@@ -645,11 +683,15 @@ impl Sim {
         let (front, bev) = if self.config.front.is_some() || self.config.bev.is_some() {
             let map = self.render_map_or_build();
             let route_pts = self.route_points_world(&ego.pose);
-            let frame = frame_input(&ep.world, &route_pts);
+            let frame = frame_input(ep, &route_pts);
             let front = match &self.config.front {
                 Some(cfg) => {
                     let mut img = Image::new(cfg.width, cfg.height);
                     crate::render::render_camera(&map, &frame, cfg, &mut img)?;
+                    if let Some(fault) = self.config.camera_fault {
+                        let mut last = ep.fault_frame.lock().unwrap_or_else(|p| p.into_inner());
+                        fault.apply(&mut img, &mut last, ep.seed, ep.decisions);
+                    }
                     Some(img)
                 }
                 None => None,
@@ -849,6 +891,7 @@ pub struct FrameSnapshot {
     lights: Vec<TrafficLightView>,
     signs: Vec<SignView>,
     route_points: Vec<Vec2>,
+    ambience: Ambience,
 }
 
 impl FrameSnapshot {
@@ -859,6 +902,7 @@ impl FrameSnapshot {
             lights: &self.lights,
             signs: &self.signs,
             route_points: &self.route_points,
+            ambience: self.ambience,
         }
     }
 
@@ -871,13 +915,15 @@ impl FrameSnapshot {
     }
 }
 
-fn frame_input<'a>(world: &'a World, route_points: &'a [Vec2]) -> FrameInput<'a> {
+fn frame_input<'a>(ep: &'a Episode, route_points: &'a [Vec2]) -> FrameInput<'a> {
+    let world = &ep.world;
     FrameInput {
         ego: world.ego(),
         actors: world.actors(),
         lights: world.lights(),
         signs: world.signs(),
         route_points,
+        ambience: ep.ambience(),
     }
 }
 

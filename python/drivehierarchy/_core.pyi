@@ -75,6 +75,9 @@ class _Constants(TypedDict):
     sign_kinds: list[str]
     depart_lanes: list[str]
     depart_speeds: list[str]
+    times_of_day: list[str]
+    weathers: list[str]
+    camera_faults: list[str]
     traffic_modes: list[str]
     deprecated_traffic_modes: dict[str, str]
     ego_vclass: str

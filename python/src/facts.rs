@@ -3,7 +3,9 @@
 //! themselves so that no other copy exists. Enum names come from each type's JSON Schema
 //! (`schemars`, i.e. what serde reads), so a new variant shows up here without an edit.
 
+use dh_env::conditions::{TimeOfDay, Weather};
 use dh_env::map::VClass;
+use dh_env::render::CameraFault;
 use dh_env::scenario::schema::{ActorSpec, AtEndSpec, BehaviorSpec, BrakeSpec, ChainEventSpec, TriggerSpec};
 use dh_env::scenario::traffic::{
     parse_vtypes, LaneChoice, SpeedChoice, BUILTIN_VTYPES, BUILTIN_VTYPES_NAME, DEFAULT_VTYPE,
@@ -119,6 +121,9 @@ fn constants(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
         rules.append(rule)?;
     }
     d.set_item("of_rules", rules)?;
+    d.set_item("times_of_day", names::<TimeOfDay>())?;
+    d.set_item("weathers", names::<Weather>())?;
+    d.set_item("camera_faults", CameraFault::ALL.map(CameraFault::as_str).to_vec())?;
 
     let modes = names::<TrafficMode>();
     for m in &modes {

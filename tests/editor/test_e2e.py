@@ -874,3 +874,28 @@ def test_new_in_a_category_root_without_a_default_map(page, category_server: str
     assert page.inner_text("#status") == "saved here.toml"
     root = workspace.parent / "category_root" / "01_pedestrian"
     assert (root / "here.toml").is_file() and not (root / "01_pedestrian").exists()
+
+
+def test_conditions_are_picked_from_the_facts_and_saved(page, server: str, workspace: Path) -> None:
+    path = workspace / "r4" / PED
+    before = path.read_text(encoding="utf-8")
+    page.goto(server + "#" + PED)
+    idle(page)
+    options = page.eval_on_selector_all(
+        "[data-path='conditions.weather'] option", "els => els.map(e => e.value)"
+    )
+    assert options == ["", "clear", "overcast", "rain", "fog"]
+    page.select_option("[data-path='conditions.time_of_day']", "night")
+    idle(page)
+    page.select_option("[data-path='conditions.weather']", "rain")
+    idle(page)
+    assert page.is_hidden("#error-box"), page.inner_text("#error-box")
+    page.click("#btn-save")
+    idle(page)
+    after = path.read_text(encoding="utf-8")
+    try:
+        assert "[conditions]" in after and 'time_of_day = "night"' in after and 'weather = "rain"' in after
+        r = validate_cli(path)
+        assert r.returncode == 0, r.stdout + r.stderr
+    finally:
+        path.write_text(before, encoding="utf-8")

@@ -31,6 +31,8 @@ SCHEMA_ENUMS = {
     "chain_events": "ChainEventSpec",
     "depart_lanes": "LaneChoice",
     "depart_speeds": "SpeedChoice",
+    "times_of_day": "TimeOfDay",
+    "weathers": "Weather",
 }
 # What the editor page takes from `/api/facts` (`K().<key>` in editor.js).
 EDITOR_KEYS = [
@@ -43,6 +45,8 @@ EDITOR_KEYS = [
     "chain_events",
     "depart_lanes",
     "depart_speeds",
+    "times_of_day",
+    "weathers",
     "vclass_of",
     "actor_keys",
     "start_triggers",

@@ -12,12 +12,17 @@ const SKIN: [u8; 3] = [224, 172, 135];
 const TROUSERS: [u8; 3] = [55, 75, 140];
 
 fn lights(m: &mut Mesh, fr: &Frame, hl: f32, hw: f32, z: f32, braking: bool, blinkers: u8) {
-    let brake = if braking { [255, 25, 25] } else { [120, 20, 20] };
+    let brake = match (braking, m.lit) {
+        (true, _) => [255, 25, 25],
+        (false, true) => [190, 18, 18],
+        (false, false) => [120, 20, 20],
+    };
+    let head = if m.lit { [255, 250, 228] } else { [235, 235, 210] };
     for side in [-1.0f32, 1.0] {
         let left = side * (hw - 0.25);
         // Rear lamps protrude 3 cm so they win the depth test against the body.
-        m.out_lamp(fr, -hl - 0.03, left, z, 0.18, 0.09, brake, braking);
-        m.out_lamp(fr, hl + 0.03, left, z, 0.17, 0.07, [235, 235, 210], false);
+        m.out_lamp(fr, -hl - 0.03, left, z, 0.18, 0.09, brake, braking || m.lit);
+        m.out_lamp(fr, hl + 0.03, left, z, 0.17, 0.07, head, m.lit);
         // Indicators at the outer corners, front and rear. A lit one is drawn steadily (not
         // flashing) so a single frame, which is all a VLM sees per decision, shows it.
         // Only lit ones are drawn: the body colour stands in for the unlit housing.
@@ -30,13 +35,14 @@ fn lights(m: &mut Mesh, fr: &Frame, hl: f32, hw: f32, z: f32, braking: bool, bli
     }
 }
 
-/// Appends the triangles of one actor; `detail` = near the camera (rounder wheels).
-pub(crate) fn actor(out: &mut Vec<Tri3>, a: &ActorView, origin: Vec2, id: u32, detail: bool) {
+/// Appends the triangles of one actor; `detail` = near the camera (rounder wheels); `lit` =
+/// its lamps burn (night).
+pub(crate) fn actor(out: &mut Vec<Tri3>, a: &ActorView, origin: Vec2, id: u32, detail: bool, lit: bool) {
     let fr = Frame::new(a.pose.pos, a.pose.yaw, origin, 0.0);
     let (l, w, h) = actor_dims(a);
     let (hl, hw) = (l * 0.5, w * 0.5);
     let col = a.color;
-    let mut m = Mesh { out, id, paint: Some(a.color) };
+    let mut m = Mesh { out, id, paint: Some(a.color), lit };
     match a.kind {
         ActorKind::Car | ActorKind::Bus | ActorKind::Truck => {
             super::vehicles::vehicle(&mut m, &fr, a, l, w, h, detail);

@@ -5,6 +5,7 @@
 //! above the ground from a camera above it, so they are painted in layer order without depth;
 //! actors, signals, signs and props are then depth-tested among themselves.
 
+use super::conditions::{self, Basis, Eye, Look};
 use super::frame::{FrameInput, Renderer};
 use super::image::Image;
 use super::map::{Mat, RenderMap, N_LAYERS, N_MATS};
@@ -171,12 +172,7 @@ pub struct ProjectedActor {
 }
 
 const NEAR: f32 = 0.1;
-const SKY_TOP: [f32; 3] = [92.0, 145.0, 215.0];
-const HORIZON: [f32; 3] = [205.0, 215.0, 225.0];
-const GRASS: [f32; 3] = [110.0, 128.0, 88.0];
-const FOG0: f32 = 45.0;
 const MARKING_MAX_M: f32 = 130.0;
-const FOG1: f32 = 260.0;
 /// Actors nearer than this get their detailed mesh (rounder wheels).
 const DETAIL_M: f64 = 35.0;
 
@@ -316,19 +312,39 @@ impl Cam {
     }
 }
 
-fn fog_k(d: f32) -> f32 {
-    ((d - FOG0) / (FOG1 - FOG0)).clamp(0.0, 0.8)
+impl Eye for Cam {
+    fn basis(&self) -> Basis {
+        Basis {
+            pos: self.pos,
+            r: self.r,
+            d: self.d,
+            f: self.f,
+            fx: self.fx,
+            cx: self.cx,
+            cy: self.cy,
+            far: self.far,
+        }
+    }
+    fn to_cam(&self, p: [f32; 3]) -> [f32; 3] {
+        Cam::to_cam(self, p)
+    }
+    fn outside(&self, c: &[[f32; 3]]) -> bool {
+        Cam::outside(self, c)
+    }
+    fn clip_project(&self, c: [[f32; 3]; 3], out: &mut [SV; 4]) -> usize {
+        Cam::clip_project(self, c, out)
+    }
 }
 
 #[inline(always)]
-fn fogged(col: [u8; 3], k: f32) -> [u8; 3] {
+fn fogged(col: [u8; 3], k: f32, fog: [f32; 3]) -> [u8; 3] {
     if k <= 0.0 {
         return col;
     }
     [
-        (col[0] as f32 + (HORIZON[0] - col[0] as f32) * k) as u8,
-        (col[1] as f32 + (HORIZON[1] - col[1] as f32) * k) as u8,
-        (col[2] as f32 + (HORIZON[2] - col[2] as f32) * k) as u8,
+        (col[0] as f32 + (fog[0] - col[0] as f32) * k) as u8,
+        (col[1] as f32 + (fog[1] - col[1] as f32) * k) as u8,
+        (col[2] as f32 + (fog[2] - col[2] as f32) * k) as u8,
     ]
 }
 
@@ -354,16 +370,18 @@ fn may_see(cam: &Cam, map: &RenderMap, a: &ActorView) -> bool {
 }
 
 /// Appends the dynamic scene (actors, signals, signs) the camera may see to `out`; actor
-/// triangles carry id = index in `frame.actors` + 1, the ego `u32::MAX` when drawn.
+/// triangles carry id = index in `frame.actors` + 1, the ego `u32::MAX` when drawn. `lit`:
+/// vehicle lamps burn (night).
 pub(crate) fn dynamic_tris(
     cam: &Cam,
     map: &RenderMap,
     frame: &FrameInput,
     draw_ego: bool,
+    lit: bool,
     out: &mut Vec<Tri3>,
 ) {
     if draw_ego {
-        super::actors::actor(out, frame.ego, map.origin, u32::MAX, true);
+        super::actors::actor(out, frame.ego, map.origin, u32::MAX, true, lit);
     }
     for (i, a) in frame.actors.iter().enumerate() {
         if a.id == frame.ego.id && a.pose == frame.ego.pose {
@@ -373,7 +391,7 @@ pub(crate) fn dynamic_tris(
             continue;
         }
         let near = a.pose.pos.dist(frame.ego.pose.pos) < DETAIL_M;
-        super::actors::actor(out, a, map.origin, i as u32 + 1, near);
+        super::actors::actor(out, a, map.origin, i as u32 + 1, near, lit);
     }
     for l in frame.lights {
         let place = map.signal_places.get(&l.lane_id);
@@ -419,7 +437,15 @@ impl Renderer {
             self.ss = ss;
         }
         self.raster = raster;
+        self.lens_effects(frame, cfg, out);
         Ok(())
+    }
+
+    /// What the weather leaves on the lens of a camera mounted on the ego (rain drops).
+    fn lens_effects(&mut self, frame: &FrameInput, cfg: &CameraConfig, out: &mut Image) {
+        if !cfg.draw_ego && Look::of(frame.ambience.conditions).drops {
+            conditions::rain_on_lens(out, &frame.ambience, &mut self.lens);
+        }
     }
 
     /// Issues one camera's view to `b`: backdrop, ground layers and markings in painter's
@@ -432,7 +458,8 @@ impl Renderer {
         cam: &Cam,
         b: &mut B,
     ) {
-        background(cam, b);
+        let look = Look::of(frame.ambience.conditions);
+        background(cam, &look, b);
 
         // Cells in the draw-distance square, frustum-tested.
         self.cells.clear();
@@ -442,7 +469,15 @@ impl Renderer {
                 self.cells.push(i);
             }
         });
-        let cols = mat_colors();
+        let mut cols = mat_colors();
+        if !look.is_noon_clear() {
+            for (i, c) in cols.iter_mut().enumerate() {
+                *c = look.lit(*c);
+                if i == Mat::Road as usize || i == Mat::Junction as usize {
+                    *c = c.map(|v| (v as f32 * look.road) as u8);
+                }
+            }
+        }
         let mut poly = [SV { x: 0.0, y: 0.0, w: 0.0 }; 4];
         for layer in 0..N_LAYERS {
             for &off in &self.cells {
@@ -458,7 +493,7 @@ impl Renderer {
                         (gt.p[0][1] + gt.p[1][1] + gt.p[2][1]) / 3.0,
                     ];
                     let d = ((cxy[0] - cam.pos[0]).powi(2) + (cxy[1] - cam.pos[1]).powi(2)).sqrt();
-                    let col = fogged(cols[gt.mat as usize], fog_k(d));
+                    let col = fogged(cols[gt.mat as usize], look.fog_k(d), look.fog);
                     let n = cam.clip_project(p, &mut poly);
                     b.fill_convex(&poly[..n], col);
                 }
@@ -497,7 +532,7 @@ impl Renderer {
                 if cam.outside(&q) {
                     continue;
                 }
-                let col = fogged(cols[sg.mat as usize], fog_k(d));
+                let col = fogged(cols[sg.mat as usize], look.fog_k(d), look.fog);
                 for tri in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
                     let n = cam.clip_project(tri, &mut poly);
                     b.fill_convex(&poly[..n], col);
@@ -505,33 +540,46 @@ impl Renderer {
             }
         }
 
-        // Shadows of the actors on the ground, under everything standing on it.
-        for a in frame.actors {
-            if a.id == frame.ego.id && a.pose == frame.ego.pose {
-                continue;
-            }
-            if may_see(cam, map, a) {
-                shadow(cam, map, a, b, &mut poly);
-            }
+        if look.night {
+            conditions::light_pools(cam, map, frame.ego, frame.actors, b, &mut poly);
         }
-        if cfg.draw_ego {
-            shadow(cam, map, frame.ego, b, &mut poly);
+
+        // Shadows of the actors on the ground, under everything standing on it.
+        if let Some((k, len)) = look.shadow {
+            for a in frame.actors {
+                if a.id == frame.ego.id && a.pose == frame.ego.pose {
+                    continue;
+                }
+                if may_see(cam, map, a) {
+                    shadow(cam, map, a, b, &mut poly, (look.sun, k, len));
+                }
+            }
+            if cfg.draw_ego {
+                shadow(cam, map, frame.ego, b, &mut poly, (look.sun, k, len));
+            }
         }
 
         // 3-D: props, then the dynamic scene.
         let mut dynamic = std::mem::take(&mut self.tris);
         dynamic.clear();
-        dynamic_tris(cam, map, frame, cfg.draw_ego, &mut dynamic);
+        dynamic_tris(cam, map, frame, cfg.draw_ego, look.night, &mut dynamic);
+        if look.night {
+            conditions::street_lamp_tris(&cam.basis(), map, &mut dynamic);
+        }
         for &off in &self.cells {
             let c = &map.cells[off];
             for tr in &map.props[c.props.0 as usize..c.props.1 as usize] {
-                draw_tri3(cam, b, tr, &mut poly);
+                draw_tri3(cam, b, tr, &mut poly, &look);
             }
         }
         for tr in &dynamic {
-            draw_tri3(cam, b, tr, &mut poly);
+            draw_tri3(cam, b, tr, &mut poly, &look);
         }
         self.tris = dynamic;
+        if look.wet || look.haze_m.is_some() {
+            let basis = cam.basis();
+            b.post(&mut |rgb, depth, w, h| conditions::post(&look, &basis, rgb, depth, w, h));
+        }
     }
 
     /// Every actor of `frame.actors` the camera sees: silhouette box, centre, distance and the
@@ -572,6 +620,7 @@ impl Renderer {
                 map.origin,
                 stamp,
                 a.pose.pos.dist(frame.ego.pose.pos) < DETAIL_M,
+                frame.ambience.conditions.time_of_day == crate::conditions::TimeOfDay::Night,
             );
             let mut total = 0usize;
             // Projected area of the whole silhouette and of its part inside the image (faces
@@ -689,6 +738,7 @@ impl Renderer {
             out.resize(cfg.width, cfg.height);
             let n = out.data.len();
             out.data.copy_from_slice(&self.ss[..n]);
+            self.lens_effects(frame, cfg, out);
         } else {
             self.render_camera(map, frame, cfg, out)?;
         }
@@ -697,9 +747,17 @@ impl Renderer {
 }
 
 /// Ground shadow of an actor: the convex hull of its footprint and the footprint moved away
-/// from the sun by its height (a cheap projected shadow), darkened to 62 %. Deterministic and
-/// allocation-free.
-fn shadow<B: RasterBackend>(cam: &Cam, map: &RenderMap, a: &ActorView, b: &mut B, poly: &mut [SV; 4]) {
+/// from the sun by its height × `len` (a cheap projected shadow), darkened to k / 256 (noon:
+/// 62 %). `light` = (towards the sun, k, len). Deterministic and allocation-free.
+fn shadow<B: RasterBackend>(
+    cam: &Cam,
+    map: &RenderMap,
+    a: &ActorView,
+    b: &mut B,
+    poly: &mut [SV; 4],
+    light: ([f32; 3], u16, f32),
+) {
+    let (sun, dark, len) = light;
     let (l, w, h) = mesh::actor_dims(a);
     let (hl, hw) = (l * 0.5 + 0.05, w * 0.5 + 0.05);
     // People and bicycles are narrower than their footprint box: a slimmer blob.
@@ -710,8 +768,8 @@ fn shadow<B: RasterBackend>(cam: &Cam, map: &RenderMap, a: &ActorView, b: &mut B
     let p = a.pose.pos - map.origin;
     let (s, c) = a.pose.yaw.sin_cos();
     let (f, lft) = ([c as f32, s as f32], [-s as f32, c as f32]);
-    let k = 0.55 * h / mesh::SUN[2];
-    let off = [-mesh::SUN[0] * k, -mesh::SUN[1] * k];
+    let k = len * h / sun[2];
+    let off = [-sun[0] * k, -sun[1] * k];
     let mut pts = [[0f32; 2]; 8];
     for (j, (u, v)) in [(hl, hw), (hl, -hw), (-hl, -hw), (-hl, hw)].into_iter().enumerate() {
         let q = [p.x as f32 + f[0] * u + lft[0] * v, p.y as f32 + f[1] * u + lft[1] * v];
@@ -747,7 +805,7 @@ fn shadow<B: RasterBackend>(cam: &Cam, map: &RenderMap, a: &ActorView, b: &mut B
             continue;
         }
         let m = cam.clip_project(t, poly);
-        b.darken_convex(&poly[..m], 158);
+        b.darken_convex(&poly[..m], dark);
     }
 }
 
@@ -800,7 +858,7 @@ fn area_inside(t: &[SV; 3], w: f32, h: f32) -> f64 {
 }
 
 #[inline(always)]
-fn draw_tri3<B: RasterBackend>(cam: &Cam, b: &mut B, tr: &Tri3, poly: &mut [SV; 4]) {
+fn draw_tri3<B: RasterBackend>(cam: &Cam, b: &mut B, tr: &Tri3, poly: &mut [SV; 4], look: &Look) {
     let p0 = tr.p[0];
     if !tr.two_sided {
         let v = [p0[0] - cam.pos[0], p0[1] - cam.pos[1], p0[2] - cam.pos[2]];
@@ -816,7 +874,7 @@ fn draw_tri3<B: RasterBackend>(cam: &Cam, b: &mut B, tr: &Tri3, poly: &mut [SV; 
         tr.col
     } else {
         let d = ((p0[0] - cam.pos[0]).powi(2) + (p0[1] - cam.pos[1]).powi(2)).sqrt();
-        fogged(tr.col, fog_k(d))
+        fogged(look.lit(tr.col), look.fog_k(d), look.fog)
     };
     let n = cam.clip_project(c, poly);
     b.fill_convex_depth(&poly[..n], col, tr.id);
@@ -824,17 +882,21 @@ fn draw_tri3<B: RasterBackend>(cam: &Cam, b: &mut B, tr: &Tri3, poly: &mut [SV; 
 
 /// Sky gradient above the horizon, fogged grass below; constant along each row because the
 /// camera has no roll.
-fn background<B: RasterBackend>(cam: &Cam, b: &mut B) {
+fn background<B: RasterBackend>(cam: &Cam, look: &Look, b: &mut B) {
+    let (sky_top, horizon, grass) = (look.sky_top, look.horizon, look.grass.map(|v| v as u8));
+    let (fog0, fog1, fog_on) = (look.fog0, look.fog1, look.fog_max > 0.0);
     b.fill_rows(&|y| {
         let yc = (y as f32 + 0.5 - cam.cy) / cam.fx;
         let dir = [cam.d[0] * yc + cam.f[0], cam.d[1] * yc + cam.f[1], cam.d[2] * yc + cam.f[2]];
         let horiz = (dir[0] * dir[0] + dir[1] * dir[1]).sqrt();
         if dir[2] >= 0.0 {
             let elev = dir[2] / horiz.max(1e-6);
-            lerp3(HORIZON, SKY_TOP, (elev * 2.5).min(1.0))
-        } else {
+            lerp3(horizon, sky_top, (elev * 2.5).min(1.0))
+        } else if fog_on {
             let dist = cam.pos[2] / -dir[2] * horiz;
-            fogged(GRASS.map(|v| v as u8), ((dist - FOG0) / (FOG1 * 1.6 - FOG0)).clamp(0.0, 1.0))
+            fogged(grass, ((dist - fog0) / (fog1 * 1.6 - fog0)).clamp(0.0, 1.0), horizon)
+        } else {
+            grass
         }
     });
 }

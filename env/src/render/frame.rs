@@ -17,6 +17,19 @@ pub struct FrameInput<'a> {
     pub signs: &'a [SignView],
     /// The protocol's local future route points, world frame.
     pub route_points: &'a [Vec2],
+    /// Light and weather, and the seed and tick its lens effects are drawn from.
+    pub ambience: Ambience,
+}
+
+/// The light and weather a frame is drawn under. Lens effects (rain drops) are a pure function
+/// of `seed` and `tick`, so a frame stays the same bytes for the same state.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Ambience {
+    pub conditions: crate::conditions::Conditions,
+    /// The episode seed.
+    pub seed: u64,
+    /// The world tick the frame shows.
+    pub tick: u64,
 }
 
 impl FrameInput<'_> {
@@ -63,6 +76,8 @@ pub struct Renderer {
     pub(super) pts: Vec<super::raster::SV>,
     /// Visible pixels of one actor (colour naming in `project_actors`).
     pub(super) px: Vec<[u8; 3]>,
+    /// Scratch of the lens effects (the pixels under a rain drop).
+    pub(super) lens: Vec<u8>,
 }
 
 impl std::fmt::Debug for Renderer {

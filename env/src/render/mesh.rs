@@ -100,6 +100,8 @@ pub(crate) struct Mesh<'a> {
     /// The actor's body colour: faces drawn in it carry [`PAINT_BIT`] in their id, so the id
     /// buffer tells paint from glazing, tyres, lamps and skin (colour naming reads paint only).
     pub paint: Option<[u8; 3]>,
+    /// Lamps burn (night): head and tail lamps are drawn emissive.
+    pub lit: bool,
 }
 
 /// Set in a [`Tri3::id`] (and the id buffer) on faces in the actor's body colour.
@@ -403,7 +405,7 @@ pub(crate) fn signal(
     pole_right: Option<f32>,
     lit_visible: bool,
 ) {
-    let mut m = Mesh { out, id: 0, paint: None };
+    let mut m = Mesh { out, id: 0, paint: None, lit: false };
     let dark = [28, 28, 30];
     let hh = LAMP_R * 3.6;
     m.bx(fr, 0.0, 0.0, z - hh, z + hh, 0.2, LAMP_R + 0.12, &all(dark));
@@ -424,7 +426,7 @@ pub(crate) fn signal(
 
 /// A sign on a post; its face looks along `fr.f`.
 pub(crate) fn sign(out: &mut Vec<Tri3>, fr: &Frame, kind: SignKind) {
-    let mut m = Mesh { out, id: 0, paint: None };
+    let mut m = Mesh { out, id: 0, paint: None, lit: false };
     let z = 2.2;
     m.bx(fr, -0.05, 0.0, 0.0, z, 0.04, 0.04, &all([150, 150, 155]));
     let red = [210, 20, 25];
@@ -452,7 +454,7 @@ pub(crate) fn sign(out: &mut Vec<Tri3>, fr: &Frame, kind: SignKind) {
 
 /// A tree: trunk and a two-tier crown.
 pub(crate) fn tree(out: &mut Vec<Tri3>, fr: &Frame, height: f32, crown: f32, shade_k: f32) {
-    let mut m = Mesh { out, id: 0, paint: None };
+    let mut m = Mesh { out, id: 0, paint: None, lit: false };
     m.bx(fr, 0.0, 0.0, 0.0, height * 0.4, 0.15, 0.15, &all([90, 65, 40]));
     let g = scale([60, 120, 50], shade_k);
     m.tbox(fr, 0.0, 0.0, height * 0.35, height * 0.75, [crown * 0.7; 3], [crown; 3], &all(g));
@@ -461,7 +463,7 @@ pub(crate) fn tree(out: &mut Vec<Tri3>, fr: &Frame, height: f32, crown: f32, sha
 
 /// A building block with window bands.
 pub(crate) fn building(out: &mut Vec<Tri3>, fr: &Frame, hl: f32, hw: f32, height: f32, col: [u8; 3]) {
-    let mut m = Mesh { out, id: 0, paint: None };
+    let mut m = Mesh { out, id: 0, paint: None, lit: false };
     m.bx(fr, 0.0, 0.0, 0.0, height, hl, hw, &[col, scale(col, 0.7), col, col, col, col]);
     // Window bands on all four sides, 5 cm proud of the wall.
     let win = [70, 90, 115];

@@ -14,6 +14,7 @@
 mod actors;
 mod bev;
 mod camera;
+mod conditions;
 mod frame;
 mod gallery;
 mod image;
@@ -31,7 +32,8 @@ mod video;
 
 pub use bev::BevConfig;
 pub use camera::{CameraConfig, ProjectedActor};
-pub use frame::{FrameInput, Renderer};
+pub use conditions::CameraFault;
+pub use frame::{Ambience, FrameInput, Renderer};
 pub use gallery::write_gallery;
 pub use image::Image;
 pub use map::RenderMap;

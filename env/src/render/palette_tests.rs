@@ -76,6 +76,7 @@ fn sunlit_paint_stays_in_its_name_range() {
                     Vec2::new(0.0, 0.0),
                     1,
                     true,
+                    false,
                 );
                 let mut lit = 0;
                 for t in tris.iter().filter(|t| t.id & PAINT_BIT != 0 && dot(t.n, sun) >= LIT_MIN_COS) {
@@ -111,8 +112,14 @@ fn rendered_actors_are_named_by_their_colour() {
                 let d = if kind == ActorKind::Bus || kind == ActorKind::Truck { 20.0 } else { 12.0 };
                 let pose = Pose::new(ego_pose.local_to_world(d, -0.5), ego_pose.yaw + dyaw);
                 let a = ActorView { pose, ..view(kind, c.rgb, 0.0, dims) };
-                let frame =
-                    FrameInput { ego: &ego, actors: &[a], lights: &[], signs: &[], route_points: &[] };
+                let frame = FrameInput {
+                    ego: &ego,
+                    actors: &[a],
+                    lights: &[],
+                    signs: &[],
+                    route_points: &[],
+                    ambience: Default::default(),
+                };
                 let found = r.project_actors(&map, &frame, &CameraConfig::front()).unwrap();
                 let got = found.first().and_then(|p| p.colour_name);
                 if got != Some(c.name) {

@@ -9,6 +9,9 @@
 //! [left, right) × [top, bottom) of the triangle's span — a top-left style rule, so shared edges
 //! are filled exactly once and results are deterministic.
 
+/// A per-pixel pass over a finished frame: `(rgb, depth, width, height)`.
+pub(crate) type PostPass<'a> = dyn FnMut(&mut [u8], &[f32], usize, usize) + 'a;
+
 /// A colour target: RGB8 rows (`width * 3` bytes each) plus its size in pixels.
 pub(crate) struct Target<'a> {
     pub rgb: &'a mut [u8],
@@ -204,6 +207,15 @@ pub(crate) trait RasterBackend {
     /// ground), fanned from its first vertex, without depth. Backends that cannot blend skip it.
     fn darken_convex(&mut self, _pts: &[SV], _k: u16) {}
 
+    /// Lights the pixels a convex polygon covers, without depth (light pools on the ground):
+    /// `span(y, x0, row)` gets each covered run of row `y` from column `x0` as RGB bytes.
+    /// Backends that cannot blend skip it.
+    fn light_convex(&mut self, _pts: &[SV], _span: &mut dyn FnMut(usize, usize, &mut [u8])) {}
+
+    /// Runs `f(rgb, depth, width, height)` over the finished frame (per-pixel weather); `depth`
+    /// is empty without a depth plane. Backends that keep no pixels skip it.
+    fn post(&mut self, _f: &mut PostPass) {}
+
     /// A thick segment a→b with square (butt) ends, half width `hw`.
     fn stroke_segment(&mut self, a: SV, b: SV, hw: f32, col: [u8; 3]) {
         let (dx, dy) = (b.x - a.x, b.y - a.y);
@@ -346,6 +358,24 @@ impl RasterBackend for SoftwareRaster {
                 }
             });
         }
+    }
+
+    fn light_convex(&mut self, pts: &[SV], span: &mut dyn FnMut(usize, usize, &mut [u8])) {
+        if pts.len() < 3 {
+            return;
+        }
+        let w = self.width;
+        for i in 1..pts.len() - 1 {
+            let rgb = &mut self.rgb;
+            for_spans(pts[0], pts[i], pts[i + 1], self.width, self.height, |y, x0, x1| {
+                span(y, x0, &mut rgb[(y * w + x0) * 3..(y * w + x1) * 3]);
+            });
+        }
+    }
+
+    fn post(&mut self, f: &mut PostPass) {
+        let depth: &[f32] = if self.planes == Planes::Colour { &[] } else { &self.depth };
+        f(&mut self.rgb, depth, self.width, self.height);
     }
 
     #[inline]

@@ -139,7 +139,14 @@ fn bev_issues_route_polyline_dots_and_ego_disc_in_protocol_colours() {
     }];
     let dists = [5.0, 10.0, 20.0, 40.0];
     let route: Vec<Vec2> = dists.iter().map(|d| ep.local_to_world(*d, 0.0)).collect();
-    let frame = FrameInput { ego: &ego, actors: &actors, lights: &lights, signs: &[], route_points: &route };
+    let frame = FrameInput {
+        ego: &ego,
+        actors: &actors,
+        lights: &lights,
+        signs: &[],
+        route_points: &route,
+        ambience: Default::default(),
+    };
     let cfg = BevConfig::default(); // 800 px, 8 px/m
     let mut rec = Recorder { height: 800, prims: Vec::new() };
     Renderer::new().draw_bev(&map, &frame, &cfg, &mut rec);
@@ -214,7 +221,14 @@ fn camera_paints_ground_before_depth_tested_actors_tagged_with_their_ids() {
         // Behind the camera: must issue nothing.
         car(6, Pose::new(ep.local_to_world(-30.0, 0.0), ep.yaw), [10, 200, 10]),
     ];
-    let frame = FrameInput { ego: &ego, actors: &actors, lights: &[], signs: &[], route_points: &[] };
+    let frame = FrameInput {
+        ego: &ego,
+        actors: &actors,
+        lights: &[],
+        signs: &[],
+        route_points: &[],
+        ambience: Default::default(),
+    };
     let cfg = CameraConfig { width: 160, height: 90, ..CameraConfig::front() };
     let cam = Cam::new(&map, &frame, &cfg, 1);
     let mut rec = Recorder { height: 90, prims: Vec::new() };

@@ -16,6 +16,8 @@ const TRIM: [u8; 3] = [30, 30, 33];
 const AMBER: [u8; 3] = [255, 165, 0];
 const HEADLAMP: [u8; 3] = [228, 230, 222];
 const TAIL_OFF: [u8; 3] = [112, 24, 26];
+const HEADLAMP_LIT: [u8; 3] = [255, 252, 235];
+const TAIL_LIT: [u8; 3] = [205, 22, 22];
 const BRAKE_ON: [u8; 3] = [255, 36, 30];
 const PLATE: [u8; 3] = [225, 225, 215];
 
@@ -80,11 +82,21 @@ impl Mesh<'_> {
 /// centres `hw_lamp` from the centre line.
 #[allow(clippy::too_many_arguments)]
 fn lamps(m: &mut Mesh, fr: &Frame, front: f32, rear: f32, z: f32, hw_lamp: f32, size: f32, a: &ActorView) {
-    let tail = if a.braking { BRAKE_ON } else { TAIL_OFF };
+    // At night the lamps burn: head lamps bright and a little larger (their glare), tail lamps
+    // dim red until the brake lights them fully.
+    let tail = match (a.braking, m.lit) {
+        (true, _) => BRAKE_ON,
+        (false, true) => TAIL_LIT,
+        (false, false) => TAIL_OFF,
+    };
     for side in [-1.0f32, 1.0] {
         let left = side * hw_lamp;
-        m.panel(fr, front + 0.02, left, z, size * 1.1, size * 0.55, 1.0, HEADLAMP, false);
-        m.panel(fr, rear - 0.02, left, z, size, size * 0.6, -1.0, tail, a.braking);
+        if m.lit {
+            m.panel(fr, front + 0.02, left, z, size * 1.35, size * 0.75, 1.0, HEADLAMP_LIT, true);
+        } else {
+            m.panel(fr, front + 0.02, left, z, size * 1.1, size * 0.55, 1.0, HEADLAMP, false);
+        }
+        m.panel(fr, rear - 0.02, left, z, size, size * 0.6, -1.0, tail, a.braking || m.lit);
         // Indicators beside the lamps; lit ones are drawn steadily (a single frame, which is all a
         // model sees per decision, must show them). Unlit ones stay as the lamp's housing.
         let bit = if side > 0.0 { BLINKER_LEFT } else { BLINKER_RIGHT };

@@ -233,6 +233,11 @@ pub struct ResolvedScenario {
     pub lights: Vec<LightProgram>,
     /// Bounds of the per-seed jitter ([`ResolvedScenario::varied`]).
     pub variation: crate::scenario::variation_spec::Variation,
+    /// Light and weather (`[conditions]`; [`ResolvedScenario::varied`] may draw others).
+    pub conditions: crate::conditions::Conditions,
+    /// `[variation] conditions`: what a seed other than 0 draws its conditions from (empty:
+    /// every seed keeps `conditions`).
+    pub condition_choices: Vec<crate::conditions::Conditions>,
 }
 
 impl ResolvedScenario {

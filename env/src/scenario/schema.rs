@@ -51,6 +51,10 @@ pub struct ScenarioFile {
     /// Bounds of the per-seed jitter (`[variation]`; defaults apply when absent).
     #[serde(default)]
     pub variation: Option<crate::scenario::variation_spec::VariationSpec>,
+    /// Light and weather (`[conditions]`; noon and clear when absent). Pictures only: the world
+    /// runs the same.
+    #[serde(default)]
+    pub conditions: Option<crate::conditions::ConditionsSpec>,
 }
 
 /// A point (and optionally a heading) either on a lane (`lane` + `s` + `offset_m`) or in

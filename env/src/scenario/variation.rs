@@ -17,6 +17,7 @@ const STREAM_EGO: u64 = 0xE90_0000_0000;
 const STREAM_ACTOR: u64 = 0xAC7_0000_0000;
 const STREAM_OBSTACLE: u64 = 0x0B5_0000_0000;
 const STREAM_TRAFFIC: u64 = 0x7AF_0000_0000;
+const STREAM_CONDITIONS: u64 = 0xC0D_0000_0000;
 
 /// Uniform in [−1, 1).
 fn sym(rng: &mut SplitMix) -> f64 {
@@ -37,6 +38,12 @@ impl ResolvedScenario {
             return s;
         }
         let v = self.variation;
+        if !self.condition_choices.is_empty() {
+            let mut rng = seeded_rng(seed, STREAM_CONDITIONS);
+            let k = ((rng.unit() * self.condition_choices.len() as f64) as usize)
+                .min(self.condition_choices.len() - 1);
+            s.conditions = self.condition_choices[k];
+        }
         // Ego: further along its route (keeping its offset from the centreline), speed ±.
         let mut rng = seeded_rng(seed, STREAM_EGO);
         let route = &self.ego.route;

@@ -48,6 +48,12 @@ pub struct VariationSpec {
     #[serde(default)]
     #[schemars(range(min = 0, max = 0.5))]
     pub traffic_speed: Option<f64>,
+    /// Conditions a seed other than 0 draws from, uniformly and deterministically per seed:
+    /// names as `r4 evaluate --conditions` takes them (`noon`, `dusk`, `night`, `overcast`,
+    /// `rain`, `fog`, `night+rain`, ...). Absent: every seed keeps `[conditions]`.
+    #[serde(default)]
+    #[schemars(length(min = 1))]
+    pub conditions: Option<Vec<String>>,
 }
 
 /// The resolved bounds of the per-seed jitter.
@@ -137,4 +143,24 @@ pub fn resolve_variation(file: &Path, spec: Option<&VariationSpec>) -> Result<(V
     t.depart_s = abs("traffic_depart_s", s.traffic_depart_s, t.depart_s)?;
     t.speed = rel("traffic_speed", s.traffic_speed, t.speed)?;
     Ok((v, t))
+}
+
+/// `[variation] conditions` → the conditions to draw from (errors name
+/// `variation.conditions[i]`).
+pub fn resolve_condition_choices(
+    file: &Path,
+    spec: Option<&VariationSpec>,
+) -> Result<Vec<crate::conditions::Conditions>> {
+    let Some(names) = spec.and_then(|s| s.conditions.as_ref()) else { return Ok(Vec::new()) };
+    if names.is_empty() {
+        return Err(Error::scenario(file, "variation.conditions", "[]", "list at least one condition"));
+    }
+    names
+        .iter()
+        .enumerate()
+        .map(|(i, n)| {
+            crate::conditions::Conditions::parse(n)
+                .map_err(|e| Error::scenario(file, format!("variation.conditions[{i}]"), n, e))
+        })
+        .collect()
 }

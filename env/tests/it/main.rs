@@ -9,6 +9,7 @@ mod map_parse;
 mod map_perf;
 mod map_real;
 mod module_cycles;
+mod render_conditions;
 mod render_golden;
 mod render_semantic;
 mod scenario_errors;

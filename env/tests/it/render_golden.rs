@@ -78,8 +78,14 @@ fn golden_scene() {
         .iter()
         .map(|d| ego_pose.local_to_world(*d, 0.0))
         .collect();
-    let frame =
-        FrameInput { ego: &ego, actors: &actors, lights: &lights, signs: &signs, route_points: &route };
+    let frame = FrameInput {
+        ego: &ego,
+        actors: &actors,
+        lights: &lights,
+        signs: &signs,
+        route_points: &route,
+        ambience: Default::default(),
+    };
     let mut img = Image::default();
     render_camera(&map, &frame, &CameraConfig { width: 160, height: 90, ..CameraConfig::front() }, &mut img)
         .unwrap();

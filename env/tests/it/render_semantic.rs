@@ -65,7 +65,7 @@ fn frame<'a>(
     lights: &'a [TrafficLightView],
     route: &'a [Vec2],
 ) -> FrameInput<'a> {
-    FrameInput { ego, actors, lights, signs: &[], route_points: route }
+    FrameInput { ego, actors, lights, signs: &[], route_points: route, ambience: Default::default() }
 }
 
 #[test]

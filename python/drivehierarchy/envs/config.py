@@ -77,6 +77,11 @@ class R4Config:
     # the process's first SUMO env, TraCI for further ones, libsumo-python without the shims
     # (docs/traffic.md).
     sumo_backend: str = "auto"
+    # Robustness controls (docs/rendering.md#conditions): light and weather for every episode,
+    # overriding the scenario's `[conditions]` ("night", "fog", "dusk+rain", ...; None = the
+    # scenario's), and a fault of the observation's front camera ("frozen" | "dropped" | "dirty").
+    conditions: str | None = _rust_default("conditions")
+    camera_fault: str | None = _rust_default("camera_fault")
 
     def __post_init__(self) -> None:
         from drivehierarchy.envs.traffic.modes import canonical_traffic_mode
@@ -86,6 +91,13 @@ class R4Config:
         object.__setattr__(self, "sumo_backend", canonical_sumo_backend(self.sumo_backend, stacklevel=3))
         if self.traffic is not None:
             object.__setattr__(self, "traffic", canonical_traffic_mode(self.traffic, stacklevel=3))
+        if self.conditions is not None:
+            object.__setattr__(self, "conditions", canonical_conditions(self.conditions))
+        faults = _core.constants()["camera_faults"]
+        if self.camera_fault is not None and self.camera_fault not in faults:
+            raise ConfigError(
+                f"config `camera_fault` = {self.camera_fault!r}: expected one of {', '.join(faults)}"
+            )
         if self.action_mode not in ("decision", "raw"):
             raise ConfigError(f"config `action_mode` = {self.action_mode!r}: expected 'decision' or 'raw'")
         if not isinstance(self.decision_interval_ticks, int) or self.decision_interval_ticks < 1:
@@ -120,6 +132,34 @@ class R4Config:
 
     def replace(self, **changes: Any) -> R4Config:
         return dataclasses.replace(self, **changes)
+
+
+def canonical_conditions(name: str) -> str:
+    """The canonical name of a conditions override (`rain+night` → `night+rain`, `noon+clear` →
+    `noon`): a time of day, a weather, or both joined by `+`; ConfigError naming the bad part."""
+    facts = _core.constants()
+    times, weathers = facts["times_of_day"], facts["weathers"]
+    time, weather = times[0], weathers[0]
+    seen: set[str] = set()
+    parts = name.split("+") if isinstance(name, str) else [name]
+    for part in parts:
+        kind = "time" if part in times else "weather" if part in weathers else None
+        if kind is None or kind in seen:
+            why = (
+                f"names two {'times of day' if kind == 'time' else 'weathers'}"
+                if kind
+                else f"expected a time of day ({', '.join(times)}), a weather ({', '.join(weathers)}) "
+                "or time+weather, e.g. night+rain"
+            )
+            raise ConfigError(f"config `conditions` = {name!r}: {why}")
+        seen.add(kind)
+        if kind == "time":
+            time = part
+        else:
+            weather = part
+    if weather == weathers[0]:
+        return str(time)
+    return str(weather) if time == times[0] else f"{time}+{weather}"
 
 
 def _from_dict(cls: type, data: Any, prefix: str) -> Any:

@@ -352,6 +352,8 @@ pub fn resolve(file: &Path, spec: &ScenarioFile, opts: &LoadOptions) -> Result<R
         crate::scenario::traffic::resolve_traffic(file, &map, spec.traffic.as_ref(), &ego.route)?;
     let (variation, jitter) =
         crate::scenario::variation_spec::resolve_variation(file, spec.variation.as_ref())?;
+    let condition_choices =
+        crate::scenario::variation_spec::resolve_condition_choices(file, spec.variation.as_ref())?;
     traffic.jitter = jitter;
     Ok(ResolvedScenario {
         file: file.to_path_buf(),
@@ -371,5 +373,7 @@ pub fn resolve(file: &Path, spec: &ScenarioFile, opts: &LoadOptions) -> Result<R
         traffic,
         lights,
         variation,
+        conditions: spec.conditions.map(Into::into).unwrap_or_default(),
+        condition_choices,
     })
 }

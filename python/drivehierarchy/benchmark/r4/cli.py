@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+from drivehierarchy import _core
 from drivehierarchy._core import ConfigError
 from drivehierarchy.benchmark.r4 import runner
 from drivehierarchy.scenarios import resolve_scenario
@@ -33,6 +34,20 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
             "--force",
             action="store_true",
             help="redo scenarios that --out already has results for (needed when a scenario file changed)",
+        )
+        c = p.add_argument_group("robustness controls (any agent; docs/rendering.md#conditions)")
+        c.add_argument(
+            "--conditions",
+            metavar="NAME",
+            help="control: draw every episode at this time of day and weather, overriding the "
+            "scenarios' [conditions]: noon, dusk, night, overcast, rain, fog or TIME+WEATHER "
+            "(e.g. night+rain)",
+        )
+        c.add_argument(
+            "--camera-fault",
+            choices=_core.constants()["camera_faults"],
+            help="control: a fault of the front camera: frozen (stops updating), dropped (about one "
+            "frame in four repeats the previous), dirty (smudged lens)",
         )
         v = p.add_argument_group("VLM agent (--agent vlm; docs/vlm.md)")
         v.add_argument("--base-url", help="OpenAI-compatible server, e.g. http://localhost:8000/v1")
@@ -172,8 +187,11 @@ def _vlm_options(args: argparse.Namespace) -> object | None:
 
 
 def _opts(args: argparse.Namespace) -> runner.RunOptions:
+    from drivehierarchy.envs.config import R4Config
+
     return runner.RunOptions(
         agent=args.agent,
+        config=R4Config(conditions=args.conditions, camera_fault=args.camera_fault),
         seed=args.seed,
         frames=args.frames,
         video=args.video,

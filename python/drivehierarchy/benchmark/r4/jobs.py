@@ -63,6 +63,8 @@ class RunOptions:
     def identity(self) -> dict[str, Any]:
         """What must match for a run directory to be resumed."""
         ident: dict[str, Any] = {"agent": self.agent, "seeds": self.seed_list()}
+        # Set controls only, so that directories of runs without them still resume.
+        ident.update({k: v for k, v in self.controls().items() if k in ("conditions", "camera_fault")})
         if self.vlm is not None:
             m = self.vlm.manifest()
             ident["vlm"] = {k: m[k] for k in ("model", "decoding", "payload", "latency_aware")}
@@ -92,6 +94,23 @@ class RunOptions:
 
     def model_name(self) -> str:
         return str(self.vlm.served_model) if self.vlm is not None else self.agent
+
+    def controls(self) -> dict[str, Any]:
+        """The robustness controls this run sets (none: `{}`): `conditions`, `camera_fault`, and
+        the VLM payload's `blind`, `no_bev`, `corrupt` and `latency_aware`."""
+        out: dict[str, Any] = {}
+        if self.vlm is not None:
+            p = self.vlm.payload
+            out.update({k: True for k in ("blind", "no_bev") if getattr(p, k)})
+            if p.corrupt is not None:
+                out["corrupt"] = p.corrupt
+            if self.vlm.latency_aware:
+                out["latency_aware"] = True
+        if self.config.conditions is not None:
+            out["conditions"] = self.config.conditions
+        if self.config.camera_fault is not None:
+            out["camera_fault"] = self.config.camera_fault
+        return out
 
 
 def scenario_key(path: Path) -> str:

@@ -18,6 +18,7 @@ import csv
 import io
 import json
 import re
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -136,13 +137,34 @@ def inputs_text(inputs: dict[str, Any]) -> str:
     return ", ".join(parts)
 
 
-def row_label(model: str, summary: dict[str, Any]) -> str:
-    """The run's row name: the model, plus its level and inputs when they are not the paper's."""
+# How each robustness control reads in a row label, in this order.
+_CONTROL_LABELS: dict[str, Callable[[Any], str]] = {
+    "blind": lambda v: "--blind",
+    "no_bev": lambda v: "--no-bev",
+    "corrupt": lambda v: f"--corrupt {v}",
+    "latency_aware": lambda v: "--latency-aware",
+    "conditions": lambda v: f"--conditions {v}",
+    "camera_fault": lambda v: f"--camera-fault {v}",
+}
+
+
+def controls_text(controls: dict[str, Any] | None) -> str:
+    """`--conditions night, --camera-fault dirty`; "" for a run without robustness controls."""
+    return ", ".join(f(controls[k]) for k, f in _CONTROL_LABELS.items() if controls and controls.get(k))
+
+
+def row_label(model: str, summary: dict[str, Any] | None) -> str:
+    """The run's row name: the model, plus its level and inputs when they are not the paper's
+    (`qwen [waypoints; history 4]`) and the robustness controls it ran with
+    (`qwen (--conditions night)`), so each combination is its own row."""
+    summary = summary or {}
     level, inputs = run_inputs(summary)
     extra = [level] if level != "control" else []
     text = inputs_text(inputs)
     extra += [text] if text else []
-    return f"{model} [{'; '.join(extra)}]" if extra else model
+    label = f"{model} [{'; '.join(extra)}]" if extra else model
+    controls = controls_text(summary.get("controls"))
+    return f"{label} ({controls})" if controls else label
 
 
 def read_run(run: Path) -> tuple[str, dict[str, Any]]:
@@ -179,7 +201,7 @@ def _key_cells(summary: dict[str, Any]) -> list[str]:
         "yes" if inputs["history_bev"] else "no",
         str(inputs["ego_history"]),
         str(inputs["memory"]),
-        " ".join(inputs["controls"]) or "none",
+        ", ".join([*inputs["controls"], *filter(None, [controls_text(summary.get("controls"))])]) or "none",
     ]
 
 
@@ -387,7 +409,7 @@ def build_report(run_dirs: list[Path], out: Path, *, paper: bool = False, plot: 
     for name, run in zip(names, run_dirs, strict=True):
         if name in seen:
             raise ConfigError(
-                f"r4 report: {seen[name]} and {run} are the same model, action level and inputs "
+                f"r4 report: {seen[name]} and {run} are the same model, action level, inputs and controls "
                 f"({name!r}); one row per combination"
             )
         seen[name] = run

@@ -257,7 +257,14 @@ async def evaluate_async(
     results = [done[j.key] for j in jobs if j.key in done]
     failed_keys = sorted(j.key for j, _ in failed)
     if results or not failed:
-        write_summary(out, results, model=opts.model_name(), failed=failed_keys, facts=opts.run_facts())
+        write_summary(
+            out,
+            results,
+            model=opts.model_name(),
+            failed=failed_keys,
+            facts=opts.run_facts(),
+            controls=opts.controls(),
+        )
     if failed:
         job, exc = failed[0]
         more = ", ".join(j.key for j, _ in failed[1:])

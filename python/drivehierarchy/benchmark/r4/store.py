@@ -127,6 +127,7 @@ def write_manifest(out: Path, jobs: list[Job], opts: RunOptions) -> None:
         "identity": opts.identity(),
         "vlm": opts.vlm.manifest() if opts.vlm is not None else None,
         **opts.run_facts(),
+        "controls": opts.controls(),
         "jobs": opts.jobs,
         "ray_address": opts.ray_address,
         "config": opts.config.to_core(),

@@ -94,6 +94,7 @@ def write_summary(
     model: str | None = None,
     failed: list[str] | None = None,
     facts: dict[str, Any] | None = None,
+    controls: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """`facts`: the run's action level and inputs (`RunOptions.run_facts`), which `r4 report`
     compares."""
@@ -105,6 +106,8 @@ def write_summary(
     if model is not None:
         summary["model"] = model
     summary.update(facts or {})
+    if controls:
+        summary["controls"] = controls
     write_json_atomic(out / "summary.json", summary)
     rows = [
         "scenario,category,seed,status,termination_reason,score_route,score_safety,score_efficiency,"

@@ -1082,7 +1082,7 @@ function renderForm() {
     field("reference_duration_s", ["reference_duration_s"], "number"), field("duration_s", ["duration_s"], "number"),
     field("seed", ["seed"], "int"));
   gen.append(...extras(S.doc, ["version", "id", "name", "category", "description", "map", "reference_duration_s", "duration_s",
-    "seed", "ego", "actors", "obstacles", "lights", "traffic", "signs"], []));
+    "seed", "ego", "actors", "obstacles", "lights", "traffic", "signs", "conditions"], []));
   const ego = h("fieldset", {}, h("legend", {}, "Ego"));
   const egoPoint = (key) => () => {
     if (!S.geo) return null;
@@ -1093,7 +1093,13 @@ function renderForm() {
     idList("route_edges", ["ego", "route_edges"], "edge", EGO_VCLASS()), field("speed_mps", ["ego", "speed_mps"], "number"));
   ego.append(h("div", { class: "cells" }, colorField("color", ["ego", "color"])));
   ego.append(...extras(S.doc.ego, ["start", "destination", "route_edges", "speed_mps", "color"], ["ego"]));
-  form.append(gen, ego);
+  // Light and weather: pictures only (docs/rendering.md#conditions); the preview draws them.
+  const cond = h("fieldset", {}, h("legend", {}, "[conditions]"));
+  cond.append(h("div", { class: "cells" },
+    cell("time_of_day", ["conditions", "time_of_day"], ["", ...K().times_of_day]),
+    cell("weather", ["conditions", "weather"], ["", ...K().weathers])),
+  ...(isObj(S.doc.conditions) ? extras(S.doc.conditions, ["time_of_day", "weather"], ["conditions"], true) : []));
+  form.append(gen, ego, cond);
   (S.doc.actors || []).forEach((a, i) => form.append(actorForm(a, i)));
   (S.doc.obstacles || []).forEach((o, i) => {
     const fs = h("fieldset", {}, h("legend", {}, `obstacles[${i}] ${o.name || ""}`));
