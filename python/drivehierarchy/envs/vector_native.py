@@ -181,6 +181,7 @@ class DriveHierarchyR4VectorEnv(VectorEnv[dict[str, Any], np.ndarray, np.ndarray
         expected = self.action_space.shape
         if arr.shape != expected:
             raise ConfigError(f"config `actions` = {actions!r}: expected shape {expected}, got {arr.shape}")
+        arr = arr.reshape(self.num_envs, -1)  # waypoint plans (N, K, 2) go to the core as rows
         # Envs that autoreset ignore their action, as in SyncVectorEnv.
         stepping = ~self._autoreset
         if not np.all(np.isfinite(arr[stepping])):

@@ -44,6 +44,21 @@ class RunOptions:
     # Redo every requested scenario even if `results.jsonl` has it (a changed scenario file is
     # refused without it).
     force: bool = False
+    # The level the agent decides at (`--action-level`): "control" (the paper's protocol), or this
+    # project's extensions "waypoints" and "meta" (docs/r4.md#action-levels). Sets the env's
+    # `action_mode`; recorded in the manifest and part of a run's identity.
+    action_level: str = "control"
+
+    def __post_init__(self) -> None:
+        from drivehierarchy.envs.config import ACTION_LEVELS
+
+        if self.action_level not in ACTION_LEVELS:
+            raise ConfigError(
+                f"config `action_level` = {self.action_level!r}: expected one of {', '.join(ACTION_LEVELS)}"
+            )
+        mode = ACTION_LEVELS[self.action_level]
+        if self.config.action_mode != mode:
+            self.config = self.config.replace(action_mode=mode)
 
     def seed_list(self) -> list[int]:
         if self.seeds < 1:
@@ -53,6 +68,8 @@ class RunOptions:
     def identity(self) -> dict[str, Any]:
         """What must match for a run directory to be resumed."""
         ident: dict[str, Any] = {"agent": self.agent, "seeds": self.seed_list()}
+        if self.action_level != "control":  # control-level manifests predate the key
+            ident["action_level"] = self.action_level
         if self.vlm is not None:
             m = self.vlm.manifest()
             ident["vlm"] = {k: m[k] for k in ("model", "decoding", "payload", "latency_aware")}

@@ -129,6 +129,8 @@ def write_manifest(out: Path, jobs: list[Job], opts: RunOptions) -> None:
         "jobs": opts.jobs,
         "ray_address": opts.ray_address,
         "config": opts.config.to_core(),
+        # "control" is the paper's protocol; "waypoints" and "meta" are this project's extension.
+        "action_level": opts.action_level,
         "scenarios": {
             j.key: {"path": str(j.scenario), "sha256": sha256_of(j.scenario), "seed": j.seed} for j in jobs
         },
