@@ -1569,20 +1569,22 @@ impl Expert {
         let v = ego.speed_mps.max(0.0);
         let speed = if a.target_speed_mps <= META_STOP_MPS {
             SpeedAction::Stop
-        } else if a.target_speed_mps > v + META_KEEP_BAND_MPS {
+        } else if a.target_speed_mps > v + META_KEEP_BAND_MPS || (v < 1.0 && a.target_speed_mps > v) {
             SpeedAction::Accelerate
         } else if a.target_speed_mps < v - META_KEEP_BAND_MPS {
             SpeedAction::Decelerate
         } else {
             SpeedAction::Keep
         };
-        let reach = (2.5 * v).max(30.0);
+        // The path is compared over the next few seconds (where the next decisions can still
+        // change it), nearest first.
+        let step = (0.8 * v).max(META_SAMPLE_MIN_M);
+        let reach = META_SAMPLES as f64 * step;
         let mut path = PathAction::FollowLane;
         let mut speed = speed;
         if self.s_hint.is_some() && ego.pose.pos.is_finite() {
             let own = self.pursued_path(route, reach);
-            let samples: Vec<Vec2> =
-                (1..=6).map(|i| own.point_at(own.length() * f64::from(i) / 6.0)).collect();
+            let samples: Vec<Vec2> = (1..=META_SAMPLES).map(|i| own.point_at(step * i as f64)).collect();
             let cost = |p: PathAction| {
                 resolve_path(world.map(), route, &ego.pose, v, p, reach + 10.0).map_or(
                     f64::INFINITY,
@@ -1616,6 +1618,9 @@ impl Expert {
 
 /// Targets at or below this are STOP; within this band of the ego speed, KEEP, m/s.
 const META_STOP_MPS: f64 = 0.2;
+/// Path samples compared (every `max(0.8 s · v, META_SAMPLE_MIN_M)` metres ahead).
+const META_SAMPLES: usize = 5;
+const META_SAMPLE_MIN_M: f64 = 5.0;
 const META_KEEP_BAND_MPS: f64 = 0.5;
 /// Another path action replaces FOLLOW_LANE only when its path is nearer by this, m.
 const META_PATH_TIE_M: f64 = 0.3;

@@ -170,6 +170,9 @@ pub struct WaypointTracker {
     ticks: u64,
     integral: f64,
     last_error: Option<f64>,
+    /// The last steer; held while the ego stands under a stop (the wheel stays where it was, as
+    /// a driver's does, instead of following a path that has no direction at rest).
+    last_steer: f64,
     acc: TrackingError,
 }
 
@@ -243,8 +246,9 @@ impl WaypointTracker {
         if v_plan <= g.stop_speed_mps && v_ref <= g.stop_speed_mps && v < 0.5 {
             self.integral = 0.0;
             self.last_error = None;
-            return Control { throttle: 0.0, brake: g.hold_brake, steer };
+            return Control { throttle: 0.0, brake: g.hold_brake, steer: self.last_steer };
         }
+        self.last_steer = steer;
         let e = v_ref - v;
         self.integral = (self.integral + e * DT_S).clamp(-g.integral_limit_m, g.integral_limit_m);
         let de = self.last_error.map_or(0.0, |le| (e - le) / DT_S);
