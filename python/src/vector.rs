@@ -5,10 +5,9 @@
 use crate::env::{err, map_cache};
 use crate::json::{from_py, to_py};
 use dh_env::batch::{BatchOp, BatchOutcome, SimBatch};
-use dh_env::drive::{Control, Decision};
 use dh_env::render::Image;
 use dh_env::scenario::LoadOptions;
-use dh_env::sim::{Action, ActionMode, Sim, SimConfig};
+use dh_env::sim::{Sim, SimConfig};
 use dh_env::world::TrafficModel;
 use numpy::ndarray::{Array2, Array4};
 use numpy::{IntoPyArray, PyArray1, PyReadonlyArray2};

@@ -215,7 +215,7 @@ impl WaypointTracker {
         let v = if speed_mps.is_finite() { speed_mps.max(0.0) } else { 0.0 };
         let t = self.ticks as f64 * DT_S;
         // Error bookkeeping at the state the control is computed from.
-        let lateral = plan.path.project(ego.pos).map_or(0.0, |p| p.distance);
+        let (lateral, s_ego) = plan.path.project(ego.pos).map_or((0.0, 0.0), |p| (p.distance, p.s));
         let (v_now, _) = plan.speed_at(t);
         self.acc.lateral_max_m = self.acc.lateral_max_m.max(lateral);
         self.acc.lateral_mean_m += lateral;
@@ -238,7 +238,6 @@ impl WaypointTracker {
         // Longitudinal: PID on the previewed plan speed corrected by the progress error,
         // feed-forward of the plan's slope.
         let (v_plan, slope) = plan.speed_at(t + g.speed_preview_s);
-        let s_ego = plan.path.project(ego.pos).map_or(0.0, |p| p.s);
         let lag = (plan.progress_at(t) - s_ego).min(plan.progress_at(f64::INFINITY) - s_ego);
         let v_ref =
             (v_plan + (g.progress_gain * lag).clamp(-g.progress_limit_mps, g.progress_limit_mps)).max(0.0);
