@@ -341,15 +341,22 @@ mod tests {
     fn tracks_a_straight_constant_speed_plan() {
         let mut tr = WaypointTracker::new(TrackerGains::default());
         let mut s = EgoState::new(Pose::new(Vec2::new(0.0, 0.0), 0.0), 8.0);
+        let mut last = TrackingError::default();
         for _ in 0..40 {
             // Replan at 4 Hz: 8 m/s along y = 1 (1 m to the ego's left at the start).
-            let pts: Vec<(f64, f64)> = (1..=8).map(|k| (8.0 * 0.5 * k as f64, 1.0 - s.pose.pos.y)).collect();
+            let pts: Vec<(f64, f64)> = (1..=8)
+                .map(|k| {
+                    let (f, r) = s.pose.to_forward_right(Vec2::new(s.pose.pos.x + 4.0 * k as f64, 1.0));
+                    (f, -r)
+                })
+                .collect();
             tr.set_plan(s.pose, &pts, 0.5);
             s = drive(&mut tr, s, 5);
+            last = tr.take_error();
         }
         assert!((s.pose.pos.y - 1.0).abs() < 0.1, "{:?}", s.pose);
         assert!((s.speed_mps - 8.0).abs() < 0.3, "{}", s.speed_mps);
-        let e = tr.take_error();
+        let e = last;
         assert!(e.ticks == 5 && e.lateral_mean_m < 0.1 && e.speed_mean_mps < 0.3, "{e:?}");
     }
 
