@@ -14,7 +14,7 @@ root=$PWD
 
 secs=${1:-15}
 shift || true
-all=(scenario_toml scenario_world net_xml vlm_reply run_log openloop_answer openloop_predictions)
+all=(scenario_toml scenario_world net_xml vlm_reply plan_reply run_log openloop_answer openloop_predictions)
 targets=("$@")
 [ ${#targets[@]} -gt 0 ] || targets=("${all[@]}")
 

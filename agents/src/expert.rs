@@ -36,6 +36,7 @@
 //! State: the expert assumes each [`Expert::act`] output reaches the bridge (one call per
 //! decision); [`Expert::reset`] at every episode start.
 
+use dh_env::drive::{MetaAction, PathAction, SpeedAction};
 use dh_env::geom::{wrap_angle, Polyline, Pose, Projection, Vec2};
 use dh_env::map::{LaneIdx, Network};
 use dh_env::view::{ActorKind, ActorView, LightColor, TrafficLightView};
@@ -1497,3 +1498,131 @@ impl From<ExpertAction> for dh_env::drive::bridge::Decision {
         Self { steer: a.steer, target_speed_mps: a.target_speed_mps }
     }
 }
+
+/// The expert's plan at the `waypoints` and `meta` levels (docs/r4.md#action-levels): the same
+/// decision, exposed as the plan those levels take, so `--agent expert` at every level measures
+/// what the interface and its tracker cost.
+impl Expert {
+    /// Takes the wheel as it is (the waypoint tracker, not the bridge, steers at the plan
+    /// levels): the expert's speed bounds read the current steer.
+    fn sync_steer(&mut self, world: &World) {
+        let wheel = world.ego_state().steer_angle_rad;
+        let max = self.params.max_wheel_angle_rad;
+        if wheel.is_finite() && max > 0.0 {
+            self.last_steer = (-wheel / max).clamp(-1.0, 1.0);
+        }
+    }
+
+    /// The pursued path (route plus any detour offset) sampled every metre from the ego's
+    /// progress for `length_m`, world frame.
+    fn pursued_path(&self, route: &Polyline, length_m: f64) -> Polyline {
+        let ext = extend_route(route);
+        let s0 = self.s_hint.unwrap_or(0.0);
+        let n = (length_m.ceil() as usize).max(2);
+        Polyline::new((0..=n).map(|i| self.path_point(&ext, s0 + length_m * i as f64 / n as f64)).collect())
+    }
+
+    /// `n` ego-frame waypoints (x forward, y left) `dt` s apart: the pursued path, at the
+    /// distances the decision's target speed gives under the protocol's bridge pedals and the
+    /// ego's longitudinal model (what the control level would drive).
+    pub fn waypoints_in_world(
+        &mut self,
+        world: &World,
+        route: &Polyline,
+        n: usize,
+        dt: f64,
+    ) -> Vec<(f64, f64)> {
+        self.sync_steer(world);
+        let a = self.act_in_world(world, route);
+        let ego = world.ego();
+        let params = world.vehicle_params();
+        let (mut v, mut s) = (ego.speed_mps.max(0.0), 0.0);
+        let sub = ((dt / dh_env::DT_S).round() as usize).max(1);
+        let h = dt / sub as f64;
+        let mut dist = Vec::with_capacity(n);
+        for _ in 0..n {
+            for _ in 0..sub {
+                let (throttle, brake) = dh_env::drive::bridge::pedals(a.target_speed_mps, v);
+                let acc =
+                    dh_env::world::longitudinal_accel(params, &Control { throttle, brake, steer: 0.0 }, v);
+                let next = (v + acc * h).clamp(0.0, params.max_speed_mps);
+                s += v * h;
+                v = next;
+            }
+            dist.push(s);
+        }
+        if !ego.pose.pos.is_finite() || self.s_hint.is_none() {
+            return dist.iter().map(|&d| (d, 0.0)).collect();
+        }
+        let path = self.pursued_path(route, s + 20.0);
+        dh_env::drive::tracker::waypoints_along(&path, &ego.pose, &dist)
+    }
+
+    /// The meta-action closest to the decision: the speed action from the target against the
+    /// ego speed, and the path action whose lane-graph path (as the env resolves it) lies
+    /// nearest to the pursued path (FOLLOW_LANE on near ties).
+    pub fn meta_in_world(&mut self, world: &World, route: &Polyline) -> MetaAction {
+        use dh_env::drive::meta::resolve_path;
+        self.sync_steer(world);
+        let a = self.act_in_world(world, route);
+        let ego = world.ego();
+        let v = ego.speed_mps.max(0.0);
+        let speed = if a.target_speed_mps <= META_STOP_MPS {
+            SpeedAction::Stop
+        } else if a.target_speed_mps > v + META_KEEP_BAND_MPS || (v < 1.0 && a.target_speed_mps > v) {
+            SpeedAction::Accelerate
+        } else if a.target_speed_mps < v - META_KEEP_BAND_MPS {
+            SpeedAction::Decelerate
+        } else {
+            SpeedAction::Keep
+        };
+        // The path is compared over the next few seconds (where the next decisions can still
+        // change it), nearest first.
+        let step = (0.8 * v).max(META_SAMPLE_MIN_M);
+        let reach = META_SAMPLES as f64 * step;
+        let mut path = PathAction::FollowLane;
+        let mut speed = speed;
+        if self.s_hint.is_some() && ego.pose.pos.is_finite() {
+            let own = self.pursued_path(route, reach);
+            let samples: Vec<Vec2> = (1..=META_SAMPLES).map(|i| own.point_at(step * i as f64)).collect();
+            let cost = |p: PathAction| {
+                resolve_path(world.map(), route, &ego.pose, v, p, reach + 10.0).map_or(
+                    f64::INFINITY,
+                    |line| {
+                        samples
+                            .iter()
+                            .map(|&q| line.project(q).map_or(f64::INFINITY, |pr| pr.distance))
+                            .sum::<f64>()
+                            / samples.len() as f64
+                    },
+                )
+            };
+            let follow = cost(PathAction::FollowLane);
+            let mut best = (follow, PathAction::FollowLane);
+            for p in PathAction::ALL.into_iter().skip(1) {
+                let c = cost(p);
+                if c + META_PATH_TIE_M < best.0 {
+                    best = (c, p);
+                }
+            }
+            path = best.1;
+            // No path action goes where the expert would (a pass the lane graph has no lane for):
+            // it stands rather than drive a path it did not plan its speed for.
+            if best.0.is_finite() && best.0 > META_PATH_MISMATCH_M {
+                speed = SpeedAction::Stop;
+            }
+        }
+        MetaAction { path, speed }
+    }
+}
+
+/// Targets at or below this are STOP; within this band of the ego speed, KEEP, m/s.
+const META_STOP_MPS: f64 = 0.2;
+/// Path samples compared (every `max(0.8 s · v, META_SAMPLE_MIN_M)` metres ahead).
+const META_SAMPLES: usize = 5;
+const META_SAMPLE_MIN_M: f64 = 5.0;
+const META_KEEP_BAND_MPS: f64 = 0.5;
+/// Another path action replaces FOLLOW_LANE only when its path is nearer by this, m.
+const META_PATH_TIE_M: f64 = 0.3;
+/// A path action whose path strays from the expert's by more than this (mean, m) is no match.
+const META_PATH_MISMATCH_M: f64 = 1.0;

@@ -76,7 +76,7 @@ fn first_number(re: &Regex, text: &str) -> Option<f64> {
 
 /// `float()` of a string already matched by [`NUM_PATTERN`]: non-ASCII decimal digits are
 /// mapped to their ASCII value first, as Python does.
-fn python_float(s: &str) -> Option<f64> {
+pub(crate) fn python_float(s: &str) -> Option<f64> {
     if s.is_ascii() {
         return s.parse().ok();
     }

@@ -10,9 +10,12 @@
 //! a reply without a usable decision, or no reply at all, holds the previous control verbatim
 //! and counts as a parse failure (docs/protocol.md#r4-actuation). Every decision is logged (`decision_log`).
 
+use crate::drive::meta::meta_waypoints;
+use crate::drive::prompt_levels::{meta_prompt, waypoint_prompt};
+use crate::drive::tracker::{DEFAULT_WAYPOINTS, DEFAULT_WAYPOINT_DT_S};
 use crate::drive::{
-    decision_prompt, navigation_command, ActuationBridge, Command, Control, Decision, DecisionFailure,
-    RouteTracker, RouteView,
+    decision_prompt, navigation_command, ActuationBridge, Command, Control, Decision, DecisionFailure, Plan,
+    RouteTracker, RouteView, TrackerGains, TrackingError, WaypointTracker,
 };
 use crate::geom::{wrap_angle, Pose, Vec2};
 use crate::render::{Ambience, BevConfig, CameraConfig, FrameInput, Image, RenderMap};
@@ -38,6 +41,19 @@ pub enum ActionMode {
     Decision,
     /// `[throttle, brake, steer]` applied as is (for RL).
     Raw,
+    /// K ego-frame points (x forward, y left) at fixed time steps, driven by the waypoint
+    /// tracker (docs/r4.md#action-levels; this project's extension of the protocol).
+    Waypoints,
+    /// A path action × a speed action, resolved on the lane graph into waypoints for the
+    /// same tracker (docs/r4.md#action-levels; this project's extension of the protocol).
+    Meta,
+}
+
+impl ActionMode {
+    /// Whether the mode's decisions are plans driven by the waypoint tracker.
+    pub fn is_plan(self) -> bool {
+        matches!(self, ActionMode::Waypoints | ActionMode::Meta)
+    }
 }
 
 /// Runtime settings of an episode (the Python `R4Config` minus the scenario).
@@ -63,7 +79,22 @@ pub struct SimConfig {
     /// A fault of the observation's front camera (a robustness control); `None`: none.
     #[serde(default)]
     pub camera_fault: Option<crate::render::CameraFault>,
+    /// Waypoint level: points per plan and seconds between them (also the meta level's plan).
+    #[serde(default = "default_waypoints")]
+    pub waypoints: u32,
+    #[serde(default = "default_waypoint_dt_s")]
+    pub waypoint_dt_s: f64,
 }
+
+fn default_waypoints() -> u32 {
+    DEFAULT_WAYPOINTS as u32
+}
+fn default_waypoint_dt_s() -> f64 {
+    DEFAULT_WAYPOINT_DT_S
+}
+
+/// Most points a waypoint plan may have.
+pub const MAX_WAYPOINTS: u32 = 64;
 
 impl Default for SimConfig {
     fn default() -> Self {
@@ -76,6 +107,8 @@ impl Default for SimConfig {
             prompt: true,
             conditions: None,
             camera_fault: None,
+            waypoints: default_waypoints(),
+            waypoint_dt_s: default_waypoint_dt_s(),
         }
     }
 }
@@ -97,6 +130,16 @@ impl SimConfig {
     pub fn validate(&self) -> Result<()> {
         if self.decision_interval_ticks == 0 {
             return Err(Error::config("decision_interval_ticks", 0, "must be ≥ 1"));
+        }
+        if self.waypoints == 0 || self.waypoints > MAX_WAYPOINTS {
+            return Err(Error::config(
+                "waypoints",
+                self.waypoints,
+                format!("must be in 1..={MAX_WAYPOINTS}"),
+            ));
+        }
+        if !(self.waypoint_dt_s.is_finite() && self.waypoint_dt_s > 0.0 && self.waypoint_dt_s <= 10.0) {
+            return Err(Error::config("waypoint_dt_s", self.waypoint_dt_s, "must be in (0, 10] seconds"));
         }
         if let Some(c) = &self.front {
             c.validate()?;
@@ -142,6 +185,14 @@ pub enum Action {
         raw: Option<String>,
         parsed: std::result::Result<Decision, DecisionFailure>,
     },
+    /// A plan of the `waypoints` (x forward, y left points) or `meta` level.
+    Plan(Plan),
+    /// A VLM reply of the `waypoints` or `meta` level, parsed by the caller; a failure holds
+    /// the last plan and counts as a parse failure.
+    PlanReply {
+        raw: Option<String>,
+        parsed: std::result::Result<Plan, DecisionFailure>,
+    },
 }
 
 /// One decision of an episode, as logged.
@@ -156,8 +207,14 @@ pub struct DecisionRecord {
     /// The decision applied (for array actions, the array; `None` for raw-control actions).
     pub parsed: Option<Decision>,
     pub failure: Option<DecisionFailure>,
-    /// The control held until the next decision.
+    /// The control held until the next decision (plan levels: the tracker's first control).
     pub control: Control,
+    /// Plan levels: the plan applied (`None` when the reply had none: the last plan was held).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plan: Option<Plan>,
+    /// Plan levels: how well the tracker followed the plan over this decision's ticks.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tracking: Option<TrackingError>,
 }
 
 /// Names of the entries of [`Observation::state`], in order.
@@ -304,6 +361,9 @@ pub struct Sim {
 struct Episode {
     world: World,
     bridge: ActuationBridge,
+    /// Plan levels: the waypoint tracker and the replies without a usable plan.
+    tracker: WaypointTracker,
+    plan_failures: u64,
     score: ScoreTracker,
     seed: u64,
     /// The ego's start in this episode (varied by the seed).
@@ -408,6 +468,8 @@ impl Sim {
         self.episode = Some(Episode {
             world,
             bridge: ActuationBridge::new(),
+            tracker: WaypointTracker::new(TrackerGains::default()),
+            plan_failures: 0,
             score,
             seed,
             start,
@@ -449,7 +511,77 @@ impl Sim {
         }
         let mut step_contacts = Vec::new();
         let mut reply = None;
-        if !ep.terminated {
+        if !ep.terminated && mode.is_plan() {
+            let (raw, plan, failure) = match (mode, action) {
+                (ActionMode::Waypoints, Action::Plan(Plan::Waypoints(pts))) => {
+                    let want = self.config.waypoints as usize;
+                    if pts.len() != want {
+                        return Err(Error::config(
+                            "action",
+                            format!("{} points", pts.len()),
+                            format!("expected {want} waypoints (x forward, y left)"),
+                        ));
+                    }
+                    for &(x, y) in &pts {
+                        check_finite("action.x", x)?;
+                        check_finite("action.y", y)?;
+                    }
+                    (None, Some(Plan::Waypoints(pts)), None)
+                }
+                (ActionMode::Meta, Action::Plan(Plan::Meta(m))) => (None, Some(Plan::Meta(m)), None),
+                (ActionMode::Waypoints, Action::PlanReply { raw, parsed: Ok(Plan::Waypoints(p)) }) => {
+                    (raw, Some(Plan::Waypoints(p)), None)
+                }
+                (ActionMode::Meta, Action::PlanReply { raw, parsed: Ok(Plan::Meta(m)) }) => {
+                    (raw, Some(Plan::Meta(m)), None)
+                }
+                (_, Action::PlanReply { raw, parsed: Err(f) }) => (raw, None, Some(f)),
+                (m, a) => {
+                    return Err(Error::config(
+                        "action",
+                        format!("{a:?}"),
+                        format!("the env's action mode is {m:?}"),
+                    ))
+                }
+            };
+            match &plan {
+                Some(p) => {
+                    let ego = *ep.world.ego();
+                    let (n, dt) = (self.config.waypoints as usize, self.config.waypoint_dt_s);
+                    let pts = match p {
+                        Plan::Waypoints(pts) => pts.clone(),
+                        Plan::Meta(m) => meta_waypoints(
+                            ep.world.map(),
+                            self.tracker.route(),
+                            &ego.pose,
+                            ego.speed_mps,
+                            *m,
+                            n,
+                            dt,
+                        ),
+                    };
+                    ep.tracker.set_plan(ego.pose, &pts, dt);
+                }
+                None => ep.plan_failures += 1,
+            }
+            ep.decisions += 1;
+            let decision = ep.decisions;
+            let tick = ep.world.tick_count();
+            let (contacts, first) = run_tracked_ticks(ep, interval)?;
+            step_contacts = contacts;
+            let record = DecisionRecord {
+                decision,
+                tick,
+                raw,
+                parsed: None,
+                failure,
+                control: first,
+                plan,
+                tracking: Some(ep.tracker.take_error()),
+            };
+            ep.decision_log.push(record.clone());
+            reply = Some(record);
+        } else if !ep.terminated {
             let speed = ep.world.ego().speed_mps;
             let (control, raw, parsed, failure) = match (mode, action) {
                 (ActionMode::Decision, Action::Decision(d)) => {
@@ -490,6 +622,8 @@ impl Sim {
                 parsed,
                 failure,
                 control,
+                plan: None,
+                tracking: None,
             };
             ep.decision_log.push(record.clone());
             reply = Some(record);
@@ -557,7 +691,7 @@ impl Sim {
             scene_id: self.scenario.id.clone(),
             wall_duration_s: ep.started.elapsed().as_secs_f64(),
             decisions: ep.decisions,
-            parse_failures: ep.bridge.parse_failures(),
+            parse_failures: ep.bridge.parse_failures() + ep.plan_failures,
         }))
     }
 
@@ -577,7 +711,7 @@ impl Sim {
         let footer = RunFooter {
             wall_duration_s: ep.started.elapsed().as_secs_f64(),
             decisions: ep.decisions,
-            parse_failures: ep.bridge.parse_failures(),
+            parse_failures: ep.bridge.parse_failures() + ep.plan_failures,
             stop: None,
         };
         Ok(RunLog { header, samples: ep.samples.clone(), footer })
@@ -674,10 +808,22 @@ impl Sim {
         let ego = *ep.world.ego();
         let view = self.tracker.future_points(&ego.pose);
         let command = navigation_command(&view.points);
-        let prompt = if self.config.prompt {
-            decision_prompt(ego.speed_mps, command, view.distance_to_go_m, &view.points)
-        } else {
+        let prompt = if !self.config.prompt {
             String::new()
+        } else {
+            let (v, d, p) = (ego.speed_mps, view.distance_to_go_m, &view.points);
+            match self.config.action_mode {
+                ActionMode::Decision | ActionMode::Raw => decision_prompt(v, command, d, p),
+                ActionMode::Waypoints => waypoint_prompt(
+                    v,
+                    command,
+                    d,
+                    p,
+                    self.config.waypoints as usize,
+                    self.config.waypoint_dt_s,
+                ),
+                ActionMode::Meta => meta_prompt(v, command, d, p),
+            }
         };
         let state = self.state_vector(ep, &ego, &view, command);
         let (front, bev) = if self.config.front.is_some() || self.config.bev.is_some() {
@@ -806,9 +952,29 @@ impl Sim {
             events: ep.score.events().to_vec(),
             trajectory_hash: hex(&ep.hasher.clone().finalize()),
             reply,
-            parse_failures: ep.bridge.parse_failures(),
+            parse_failures: ep.bridge.parse_failures() + ep.plan_failures,
         })
     }
+}
+
+/// Advances up to `n` ticks under the waypoint tracker (a control per tick), like [`run_ticks`].
+/// Returns the contacts and the first tick's control.
+fn run_tracked_ticks(ep: &mut Episode, n: u32) -> Result<(Vec<Contact>, Control)> {
+    let mut step_contacts = Vec::new();
+    let params = *ep.world.vehicle_params();
+    let mut first = None;
+    for _ in 0..n {
+        let ego = *ep.world.ego();
+        let control = ep.tracker.control(&ego.pose, ego.speed_mps, &params);
+        first.get_or_insert(control);
+        ep.control = control;
+        let (contacts, ended) = tick_once(ep, control)?;
+        step_contacts.extend(contacts);
+        if ended {
+            break;
+        }
+    }
+    Ok((step_contacts, first.unwrap_or_default()))
 }
 
 /// Advances `n` ticks with `control` held, feeding the score tracker and the log; stops at a
@@ -816,6 +982,18 @@ impl Sim {
 fn run_ticks(ep: &mut Episode, control: Control, n: u32) -> Result<Vec<Contact>> {
     let mut step_contacts = Vec::new();
     for _ in 0..n {
+        let (contacts, ended) = tick_once(ep, control)?;
+        step_contacts.extend(contacts);
+        if ended {
+            break;
+        }
+    }
+    Ok(step_contacts)
+}
+
+/// One tick with `control`: the score tracker, the hash and the log; `true` at a termination.
+fn tick_once(ep: &mut Episode, control: Control) -> Result<(Vec<Contact>, bool)> {
+    {
         let report = ep.world.tick(&control)?;
         let contacts: Vec<Contact> =
             report.contacts.iter().map(|&(actor_id, class)| Contact { actor_id, class }).collect();
@@ -844,13 +1022,12 @@ fn run_ticks(ep: &mut Episode, control: Control, n: u32) -> Result<Vec<Contact>>
             stop_sign: false,
             stop: None,
         });
-        step_contacts.extend(contacts);
-        if termination.is_some() {
+        let ended = termination.is_some();
+        if ended {
             ep.terminated = true;
-            break;
         }
+        Ok((contacts, ended))
     }
-    Ok(step_contacts)
 }
 
 fn not_started() -> Error {

@@ -5,7 +5,9 @@ use crate::errors::to_pyerr;
 use crate::json::{from_py, to_py};
 use crate::sumo_native::PySumoSession;
 use dh_agents::expert::{Expert, ExpertParams};
-use dh_env::drive::{ActuationBridge, Control, Decision, DecisionFailure};
+use dh_env::drive::{
+    ActuationBridge, Control, Decision, DecisionFailure, MetaAction, PathAction, Plan, SpeedAction,
+};
 use dh_env::render::{BevConfig, CameraConfig, GifWriter, Image};
 use dh_env::scenario::{LoadOptions, MapCache, Scenario};
 use dh_env::sim::{Action, ActionMode, FrameSnapshot, Observation, Sim, SimConfig, StepInfo};
@@ -15,6 +17,43 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock};
+
+/// One action of the env's mode from a flat row of numbers: `[steer, target]` (decision),
+/// `[throttle, brake, steer]` (raw), K (x, y) pairs flattened (waypoints) or `[path, speed]`
+/// indices (meta).
+pub(crate) fn action_from_row(config: &SimConfig, a: &[f64]) -> dh_env::Result<Action> {
+    let bad = |want: String| dh_env::Error::config("action", format!("{a:?}"), want);
+    Ok(match (config.action_mode, a) {
+        (ActionMode::Decision, [steer, target]) => {
+            Action::Decision(Decision { steer: *steer, target_speed_mps: *target })
+        }
+        (ActionMode::Raw, [throttle, brake, steer]) => {
+            Action::Raw(Control { throttle: *throttle, brake: *brake, steer: *steer })
+        }
+        (ActionMode::Waypoints, flat) if flat.len() == 2 * config.waypoints as usize => {
+            Action::Plan(Plan::Waypoints(flat.chunks_exact(2).map(|c| (c[0], c[1])).collect()))
+        }
+        (ActionMode::Meta, [path, speed]) => {
+            let index = |v: f64| (v.fract() == 0.0 && v.abs() < 1e9).then_some(v as i64);
+            let path = index(*path).and_then(PathAction::from_index);
+            let speed = index(*speed).and_then(SpeedAction::from_index);
+            match (path, speed) {
+                (Some(path), Some(speed)) => Action::Plan(Plan::Meta(MetaAction { path, speed })),
+                _ => return Err(bad("expected [path, speed] with path in 0..=5 and speed in 0..=3".into())),
+            }
+        }
+        (mode, _) => return Err(bad(format!("expected {} numbers", action_width(config, mode)))),
+    })
+}
+
+/// Numbers in one action row of `mode`.
+pub(crate) fn action_width(config: &SimConfig, mode: ActionMode) -> usize {
+    match mode {
+        ActionMode::Decision | ActionMode::Meta => 2,
+        ActionMode::Raw => 3,
+        ActionMode::Waypoints => 2 * config.waypoints as usize,
+    }
+}
 
 /// Networks parsed once per process, shared by every env on the same map.
 pub(crate) fn map_cache() -> Arc<MapCache> {
@@ -106,11 +145,28 @@ impl PySim {
         py: Python<'py>,
         reply: Option<String>,
     ) -> PyResult<(Bound<'py, PyDict>, f64, bool, bool, Bound<'py, PyAny>)> {
-        let parsed = match &reply {
-            Some(text) => dh_agents::vlm::parse_for_env(text),
-            None => Err(DecisionFailure::NoReply),
+        let config = self.inner.config();
+        let action = match config.action_mode {
+            ActionMode::Waypoints | ActionMode::Meta => {
+                let parsed = match &reply {
+                    Some(text) if config.action_mode == ActionMode::Meta => {
+                        dh_agents::plan_reply::parse_meta_reply(text)
+                    }
+                    Some(text) => {
+                        dh_agents::plan_reply::parse_waypoints_reply(text, config.waypoints as usize)
+                    }
+                    None => Err(DecisionFailure::NoReply),
+                };
+                Action::PlanReply { raw: reply, parsed }
+            }
+            ActionMode::Decision | ActionMode::Raw => {
+                let parsed = match &reply {
+                    Some(text) => dh_agents::vlm::parse_for_env(text),
+                    None => Err(DecisionFailure::NoReply),
+                };
+                Action::Reply { raw: reply, parsed }
+            }
         };
-        let action = Action::Reply { raw: reply, parsed };
         let inner = &mut self.inner;
         let out = py.detach(|| inner.step(action)).map_err(|e| err(py, e))?;
         Ok((obs_to_py(py, out.observation)?, out.reward, out.terminated, false, info_to_py(py, &out.info)?))
@@ -130,21 +186,7 @@ impl PySim {
         action: PyReadonlyArray1<'py, f64>,
     ) -> PyResult<(Bound<'py, PyDict>, f64, bool, bool, Bound<'py, PyAny>)> {
         let a = action.as_slice().map_err(|e| pyo3::exceptions::PyValueError::new_err(e.to_string()))?;
-        let action = match (self.inner.config().action_mode, a) {
-            (ActionMode::Decision, [steer, target]) => {
-                Action::Decision(Decision { steer: *steer, target_speed_mps: *target })
-            }
-            (ActionMode::Raw, [throttle, brake, steer]) => {
-                Action::Raw(Control { throttle: *throttle, brake: *brake, steer: *steer })
-            }
-            (mode, _) => {
-                let want = if mode == ActionMode::Decision { 2 } else { 3 };
-                return Err(err(
-                    py,
-                    dh_env::Error::config("action", format!("{a:?}"), format!("expected {want} numbers")),
-                ));
-            }
-        };
+        let action = action_from_row(self.inner.config(), a).map_err(|e| err(py, e))?;
         let inner = &mut self.inner;
         let out = py.detach(|| inner.step(action)).map_err(|e| err(py, e))?;
         Ok((obs_to_py(py, out.observation)?, out.reward, out.terminated, false, info_to_py(py, &out.info)?))
@@ -153,10 +195,25 @@ impl PySim {
     /// The privileged expert's action for the current state, in the env's action mode.
     fn expert_action<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let world = self.inner.world().map_err(|e| err(py, e))?;
+        let config = self.inner.config();
+        match config.action_mode {
+            ActionMode::Waypoints => {
+                let (n, dt) = (config.waypoints as usize, config.waypoint_dt_s);
+                let pts = self.expert.waypoints_in_world(world, self.inner.route(), n, dt);
+                return Ok(PyArray1::from_vec(py, pts.iter().flat_map(|&(x, y)| [x, y]).collect()));
+            }
+            ActionMode::Meta => {
+                let m = self.expert.meta_in_world(world, self.inner.route());
+                return Ok(PyArray1::from_vec(py, vec![m.path as u8 as f64, m.speed as u8 as f64]));
+            }
+            ActionMode::Decision | ActionMode::Raw => {}
+        }
         let a = self.expert.act_in_world(world, self.inner.route());
         let decision = Decision::from(a);
-        let v = match self.inner.config().action_mode {
-            ActionMode::Decision => vec![decision.steer, decision.target_speed_mps],
+        let v = match config.action_mode {
+            ActionMode::Decision | ActionMode::Waypoints | ActionMode::Meta => {
+                vec![decision.steer, decision.target_speed_mps]
+            }
             ActionMode::Raw => {
                 let speed = world.ego().speed_mps;
                 let c = self.expert_bridge.apply(Some(decision), speed);

@@ -5,10 +5,9 @@
 use crate::env::{err, map_cache};
 use crate::json::{from_py, to_py};
 use dh_env::batch::{BatchOp, BatchOutcome, SimBatch};
-use dh_env::drive::{Control, Decision};
 use dh_env::render::Image;
 use dh_env::scenario::LoadOptions;
-use dh_env::sim::{Action, ActionMode, Sim, SimConfig};
+use dh_env::sim::{Sim, SimConfig};
 use dh_env::world::TrafficModel;
 use numpy::ndarray::{Array2, Array4};
 use numpy::{IntoPyArray, PyArray1, PyReadonlyArray2};
@@ -137,7 +136,7 @@ impl PySimBatch {
             ));
         }
         let mode = self.config.action_mode;
-        let width = if mode == ActionMode::Decision { 2 } else { 3 };
+        let width = crate::env::action_width(&self.config, mode);
         let view = actions.as_ref().map(|a| a.as_array());
         if let Some(v) = &view {
             if v.shape() != [n, width] {
@@ -155,14 +154,10 @@ impl PySimBatch {
         for (i, reset) in resets.into_iter().enumerate() {
             ops.push(match (reset, &view) {
                 (Some((seed, variation)), _) => BatchOp::Reset { seed, variation },
-                (None, Some(v)) => BatchOp::Step(match mode {
-                    ActionMode::Decision => {
-                        Action::Decision(Decision { steer: v[[i, 0]], target_speed_mps: v[[i, 1]] })
-                    }
-                    ActionMode::Raw => {
-                        Action::Raw(Control { throttle: v[[i, 0]], brake: v[[i, 1]], steer: v[[i, 2]] })
-                    }
-                }),
+                (None, Some(v)) => {
+                    let row: Vec<f64> = v.row(i).iter().copied().collect();
+                    BatchOp::Step(crate::env::action_from_row(&self.config, &row).map_err(|e| err(py, e))?)
+                }
                 (None, None) => {
                     return Err(err(
                         py,

@@ -117,7 +117,7 @@ def test_one_row_per_model_level_and_inputs(runs: list[Path], tmp_path: Path) ->
 
 def test_the_same_combination_twice_is_refused(runs: list[Path], tmp_path: Path) -> None:
     twin = _run(tmp_path, "twin", "qwen", (1.0, 2.0), {"action_level": "control", "inputs": _inputs()})
-    with pytest.raises(ConfigError, match="same model, action level and inputs"):
+    with pytest.raises(ConfigError, match="same model, action level, inputs and controls"):
         report.build_report([runs[0], twin], tmp_path / "rep")
 
 

@@ -19,6 +19,7 @@ ROOT = Path(__file__).resolve().parents[2]
 SCRIPTS = ROOT / "scripts"
 # script -> its quick command line (after `python scripts/NAME`); {tmp} is the test's folder.
 QUICK: dict[str, str] = {
+    "bench_action_levels.py": "--quick",
     "bench_editor.py": "--quick",
     "bench_openloop_runner.py": "--quick",
     "bench_openloop_score.py": "--quick",

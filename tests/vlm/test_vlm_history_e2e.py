@@ -96,7 +96,10 @@ def test_history_through_the_cli_with_an_outage_and_a_resume(tmp_path: Path, sui
 def test_history_offsets_are_true_under_latency_aware(tmp_path: Path) -> None:
     """With `--latency-aware` decisions are not evenly spaced: each past frame's label is how long
     ago it really was (its tick), and the memory says when each decision was asked."""
-    server = ScriptedOpenAIServer(route_driver, latency_s=0.06)
+    # Replies alternate between instant and 0.5 s late, so the spacing of decisions is uneven
+    # however fast or loaded the machine is (0.5 s is 10 ticks; an instant reply costs ~0-2).
+    calls = itertools.count()
+    server = ScriptedOpenAIServer(route_driver, latency_s=lambda _req: 0.5 if next(calls) % 2 else 0.0)
     server.keep_log = True
     with server as url:
         vlm = VLMOptions(

@@ -34,7 +34,8 @@ pub struct Decision {
 }
 
 /// Why a decision step carried no usable decision. The first three are the reply parser's
-/// (`dh_agents::vlm::ParseFailure`); `no_reply` is a transport error or timeout.
+/// (`dh_agents::vlm::ParseFailure`); `no_reply` is a transport error or timeout; the last four
+/// are the `waypoints` and `meta` levels' parsers' (`dh_agents::plan_reply`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DecisionFailure {
@@ -42,6 +43,10 @@ pub enum DecisionFailure {
     MissingTargetSpeed,
     MissingBoth,
     NoReply,
+    MissingWaypoints,
+    MissingPathAction,
+    MissingSpeedAction,
+    MissingMetaAction,
 }
 
 /// The command applied to the ego until the next decision. Pedals in [0, 1], steer in [−1, 1].

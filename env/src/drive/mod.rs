@@ -4,13 +4,28 @@
 
 pub mod bridge;
 pub mod command;
+pub mod meta;
 pub mod prompt;
+pub mod prompt_levels;
 pub mod route;
+pub mod tracker;
 
 pub use bridge::{ActuationBridge, Control, Decision, DecisionFailure};
 pub use command::{navigation_command, Command};
+pub use meta::{MetaAction, PathAction, SpeedAction};
 pub use prompt::{condition_prefix, decision_prompt, format_1f, ACTION_QUESTION};
 pub use route::{RouteTracker, RouteView, LOOKAHEAD_M, SAMPLE_DISTANCES_M};
+pub use tracker::{TrackerGains, TrackingError, WaypointTracker};
+
+/// A plan of the `waypoints` or `meta` action level (docs/r4.md#action-levels): what a
+/// decision of those levels carries, as logged.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Plan {
+    /// Ego-frame (x forward, y left) points, metres, one per plan time step.
+    Waypoints(Vec<(f64, f64)>),
+    Meta(MetaAction),
+}
 
 use crate::geom::Pose;
 

@@ -10,7 +10,10 @@ from typing import Any, Literal
 from drivehierarchy import _core
 from drivehierarchy._core import ConfigError
 
-ActionMode = Literal["decision", "raw"]
+ActionMode = Literal["decision", "raw", "waypoints", "meta"]
+ACTION_MODES: tuple[str, ...] = ("decision", "raw", "waypoints", "meta")
+# `r4 run/evaluate --action-level`: the levels a driver (VLM, expert, policy) decides at.
+ACTION_LEVELS: dict[str, ActionMode] = {"control": "decision", "waypoints": "waypoints", "meta": "meta"}
 
 # Every default the Rust core also has is read from it (`SimConfig::default()`): one definition.
 # tests/envs/test_config_parity.py checks that the dataclasses below agree with it field by field.
@@ -58,7 +61,11 @@ class R4Config:
 
     `action_mode="decision"`: actions are `[steer, target_speed_mps]` sent through the protocol's
     actuation bridge (what a VLM outputs). `"raw"`: `[throttle, brake, steer]` applied directly
-    (for RL). Images can be switched off (`front=None`, `bev=None`) for fast state-only runs.
+    (for RL). `"waypoints"`: `waypoints` ego-frame points (x forward, y left, metres)
+    `waypoint_dt_s` apart, driven by the waypoint tracker; `"meta"`: `[path, speed]` indices of a
+    path action and a speed action, resolved on the lane graph for the same tracker (both this
+    project's extension of the protocol, docs/r4.md#action-levels). Images can be switched off
+    (`front=None`, `bev=None`) for fast state-only runs.
     """
 
     scenario: str | None = None
@@ -70,6 +77,9 @@ class R4Config:
     front: CameraConfig | None = field(default_factory=CameraConfig)
     bev: BevConfig | None = field(default_factory=BevConfig)
     prompt: bool = _rust_default("prompt")
+    # Waypoint level (and the meta level's plan): points per plan and seconds between them.
+    waypoints: int = _rust_default("waypoints")
+    waypoint_dt_s: float = _rust_default("waypoint_dt_s")
     # Background traffic: "sumo" | "idm" | "none"; None = the scenario's `[traffic]` mode.
     traffic: str | None = None
     # SUMO mode's transport: "libsumo" (libsumo's C++ API through the shim, no Python per tick),
@@ -98,8 +108,20 @@ class R4Config:
             raise ConfigError(
                 f"config `camera_fault` = {self.camera_fault!r}: expected one of {', '.join(faults)}"
             )
-        if self.action_mode not in ("decision", "raw"):
-            raise ConfigError(f"config `action_mode` = {self.action_mode!r}: expected 'decision' or 'raw'")
+        if self.action_mode not in ACTION_MODES:
+            raise ConfigError(
+                f"config `action_mode` = {self.action_mode!r}: expected one of "
+                f"{', '.join(map(repr, ACTION_MODES))}"
+            )
+        if (
+            not isinstance(self.waypoints, int)
+            or isinstance(self.waypoints, bool)
+            or not 1 <= self.waypoints <= 64
+        ):
+            raise ConfigError(f"config `waypoints` = {self.waypoints!r}: expected an integer in 1..=64")
+        dt = self.waypoint_dt_s
+        if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not 0.0 < dt <= 10.0:
+            raise ConfigError(f"config `waypoint_dt_s` = {dt!r}: expected seconds in (0, 10]")
         if not isinstance(self.decision_interval_ticks, int) or self.decision_interval_ticks < 1:
             raise ConfigError(
                 f"config `decision_interval_ticks` = {self.decision_interval_ticks!r}: "

@@ -45,7 +45,38 @@ class EpisodeNotStarted(SimulationError, gym.error.ResetNeeded):
     `SimulationError` like every other failure of the world."""
 
 
-def single_spaces(config: R4Config) -> tuple[spaces.Dict, spaces.Box]:
+# Waypoint actions live in this box (metres, ego frame): 30 m/s over a 64-point plan of 10 s steps
+# is far inside it; the tracker clips anything beyond ±200 m.
+WAYPOINT_BOUND_M = 200.0
+# Meta actions: `MultiDiscrete([len(PATH_ACTIONS), len(SPEED_ACTIONS)])`.
+PATH_ACTIONS: tuple[str, ...] = (
+    "FOLLOW_LANE",
+    "CHANGE_LANE_LEFT",
+    "CHANGE_LANE_RIGHT",
+    "GO_STRAIGHT",
+    "TURN_LEFT",
+    "TURN_RIGHT",
+)
+SPEED_ACTIONS: tuple[str, ...] = ("KEEP", "ACCELERATE", "DECELERATE", "STOP")
+
+
+def action_space(config: R4Config) -> spaces.Space[Any]:
+    """The action space of one env with `config`'s action mode."""
+    if config.action_mode == "decision":
+        return spaces.Box(
+            np.array([-1.0, 0.0], np.float32), np.array([1.0, 30.0], np.float32), dtype=np.float32
+        )
+    if config.action_mode == "waypoints":
+        b = WAYPOINT_BOUND_M
+        return spaces.Box(-b, b, (config.waypoints, 2), np.float32)
+    if config.action_mode == "meta":
+        return spaces.MultiDiscrete([len(PATH_ACTIONS), len(SPEED_ACTIONS)])
+    return spaces.Box(
+        np.array([0.0, 0.0, -1.0], np.float32), np.array([1.0, 1.0, 1.0], np.float32), dtype=np.float32
+    )
+
+
+def single_spaces(config: R4Config) -> tuple[spaces.Dict, spaces.Space[Any]]:
     """The observation and action spaces of one env with `config` (the single env's, and the
     native vector env's per-env spaces)."""
     obs: dict[str, spaces.Space[Any]] = {}
@@ -56,15 +87,7 @@ def single_spaces(config: R4Config) -> tuple[spaces.Dict, spaces.Box]:
     if config.prompt:
         obs["prompt"] = spaces.Text(max_length=PROMPT_MAX_CHARS, min_length=0, charset=PROMPT_CHARSET)
     obs["state"] = spaces.Box(-STATE_BOUND, STATE_BOUND, (len(STATE_FIELDS),), np.float32)
-    if config.action_mode == "decision":
-        action = spaces.Box(
-            np.array([-1.0, 0.0], np.float32), np.array([1.0, 30.0], np.float32), dtype=np.float32
-        )
-    else:
-        action = spaces.Box(
-            np.array([0.0, 0.0, -1.0], np.float32), np.array([1.0, 1.0, 1.0], np.float32), dtype=np.float32
-        )
-    return spaces.Dict(obs), action
+    return spaces.Dict(obs), action_space(config)
 
 
 class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
@@ -82,7 +105,10 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
     **Action** (`action_mode`): `"decision"` (default) takes `[steer, target_speed_mps]` in
     `[-1, 1] × [0, 30]` (steer < 0 turns left), a raw VLM reply `str` (parsed in Rust by the
     protocol's parser) or `None` (no reply; the previous control is held and counted);
-    `"raw"` takes `[throttle, brake, steer]` in `[0, 1] × [0, 1] × [-1, 1]`.
+    `"raw"` takes `[throttle, brake, steer]` in `[0, 1] × [0, 1] × [-1, 1]`. `"waypoints"` takes
+    `(K, 2)` ego-frame points (x forward, y left, metres; `Box`), `"meta"` `[path, speed]`
+    indices into `PATH_ACTIONS` × `SPEED_ACTIONS` (`MultiDiscrete([6, 4])`); both run through the
+    waypoint tracker and also take a raw reply `str` of their level (docs/r4.md#action-levels).
 
     **Arguments**: `scenario` (a suite id such as `"07_sudden_brake/town01_07_lead_brakes"`,
     or a path to a scenario file), `config` (an `R4Config` or a dict of its fields),
@@ -201,7 +227,7 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
             raise ConfigError(f"config `action` = {action!r}: expected shape {expected}, got {arr.shape}")
         if not np.all(np.isfinite(arr)):
             raise ConfigError(f"config `action` = {action!r}: contains NaN or infinity")
-        obs, reward, terminated, truncated, info = self.sim.step(arr)
+        obs, reward, terminated, truncated, info = self.sim.step(arr.reshape(-1))
         self._last_frame = None
         return self._shape_obs(obs), float(reward), bool(terminated), bool(truncated), info
 
@@ -213,10 +239,10 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         untouched) and the failure is counted in the score record's `parse_failures` and logged in
         `info["reply"]`.
         """
-        if self.config.action_mode != "decision":
+        if self.config.action_mode == "raw":
             raise ConfigError(
-                f"config `action` = {reply!r}: raw replies need action_mode='decision' "
-                f"(this env is {self.config.action_mode!r})"
+                f"config `action` = {reply!r}: raw replies need action_mode 'decision', 'waypoints' "
+                f"or 'meta' (this env is {self.config.action_mode!r})"
             )
         if reply is not None and not isinstance(reply, str):
             raise ConfigError(f"config `action` = {reply!r}: a reply must be a str or None")
@@ -278,9 +304,15 @@ class DriveHierarchyR4Env(gym.Env[dict[str, Any], np.ndarray]):
         return out
 
     def expert_action(self) -> np.ndarray:
-        """The privileged autopilot's action for the current state, in this env's action mode."""
+        """The privileged autopilot's action for the current state, in this env's action mode
+        (at the waypoint and meta levels its plan: the level's oracle)."""
         self._check_open("expert_action")
-        return np.asarray(self.sim.expert_action(), dtype=np.float32)
+        raw = self.sim.expert_action()
+        if self.config.action_mode == "meta":
+            return np.asarray(raw, dtype=np.int64)
+        if self.config.action_mode == "waypoints":
+            return np.asarray(raw, dtype=np.float32).reshape(self.config.waypoints, 2)
+        return np.asarray(raw, dtype=np.float32)
 
     def score(self) -> dict[str, Any]:
         """The scene score record so far (final once the episode has terminated)."""

@@ -233,6 +233,7 @@ class DriveHierarchyR4VectorEnv(VectorEnv[dict[str, Any], np.ndarray, np.ndarray
                 f"env {done} terminated and autoreset_mode is DISABLED: reset it first "
                 "(reset(options={'reset_mask': mask}))"
             )
+        arr = arr.reshape(self.num_envs, -1)  # waypoint plans (N, K, 2) go to the core as rows
         # Envs that autoreset ignore their action, as in SyncVectorEnv.
         stepping = ~self._autoreset
         if not np.all(np.isfinite(arr[stepping])):

@@ -238,6 +238,146 @@ class MixedReplyAgent(_Seeded):
         return bad[int(self.rng.integers(0, len(bad)))]
 
 
+# -- the waypoint and meta levels (docs/r4.md#action-levels) ---------------------------------------
+
+
+class _PlanLevel(_Seeded):
+    """Base of the plan levels' bad drivers: the expert's plan at the env's level as text."""
+
+    def expert_reply(self) -> str:
+        plan = self.env.expert_action()
+        if self.action_mode == "meta":
+            from drivehierarchy.envs.r4 import PATH_ACTIONS, SPEED_ACTIONS
+
+            return f"path_action: {PATH_ACTIONS[int(plan[0])]}\nspeed_action: {SPEED_ACTIONS[int(plan[1])]}"
+        # Replies give (forward, right); the plan is (x forward, y left).
+        return "waypoints: [" + ", ".join(f"({x:.2f}, {-y:.2f})" for x, y in plan) + "]"
+
+
+class RandomPlanAgent(_PlanLevel):
+    """Uniform random plans from the level's action space."""
+
+    def __init__(self, mode: str, seed: int = 0) -> None:
+        super().__init__(seed)
+        self.action_mode = mode
+        self.name = f"{mode}_random"
+
+    def act(self, obs: dict[str, Any], info: dict[str, Any]) -> np.ndarray:
+        space = self.env.action_space
+        if self.action_mode == "meta":
+            return np.array([self.rng.integers(0, n) for n in space.nvec], np.int64)
+        return self.rng.uniform(space.low, space.high).astype(np.float32)
+
+
+class HugePlanAgent(_PlanLevel):
+    """Finite waypoint plans of huge coordinates (±1e30, beyond the space; the tracker clips)."""
+
+    action_mode = "waypoints"
+    name = "waypoints_huge"
+
+    def act(self, obs: dict[str, Any], info: dict[str, Any]) -> np.ndarray:
+        k = self.env.config.waypoints
+        mag = 10.0 ** self.rng.integers(3, 31, size=(k, 2))
+        return (mag * self.rng.choice([-1.0, 1.0], size=(k, 2))).astype(np.float64)
+
+
+class ZeroPlanAgent(_PlanLevel):
+    """The empty plan: every point at the ego (stand still), every decision."""
+
+    action_mode = "waypoints"
+    name = "waypoints_zero"
+
+    def act(self, obs: dict[str, Any], info: dict[str, Any]) -> np.ndarray:
+        return np.zeros((self.env.config.waypoints, 2), np.float32)
+
+
+class NonFinitePlanAgent(_PlanLevel):
+    """NaN / ±inf in the plan on every other decision, the expert's plan in between; each must be
+    rejected with `ConfigError` and change nothing."""
+
+    rejects = True
+
+    def __init__(self, mode: str, seed: int = 0) -> None:
+        super().__init__(seed)
+        self.action_mode = mode
+        self.name = f"{mode}_non_finite"
+
+    def reset(self, env: gym.Env[Any, Any], info: dict[str, Any]) -> None:
+        super().reset(env, info)
+        self.k = 0
+
+    def act(self, obs: dict[str, Any], info: dict[str, Any]) -> np.ndarray:
+        self.k += 1
+        a = self.fallback().astype(np.float64)
+        if self.k % 2:
+            a.reshape(-1)[int(self.rng.integers(0, a.size))] = NonFiniteAgent.BAD[
+                int(self.rng.integers(0, 3))
+            ]
+        return a
+
+    def fallback(self) -> np.ndarray:
+        return np.asarray(self.env.expert_action())
+
+
+class PlanReplyAgent(_PlanLevel):
+    """Replies at a plan level: `garbage` (random text), `empty` (""), `huge` (1 MB, the expert's
+    plan at the end on every other decision), `none` (no reply) or `mixed` (the expert's plan half
+    the time, else broken plans: NaN, one point, the other level's words, prose, nothing)."""
+
+    def __init__(self, mode: str, style: str, seed: int = 0) -> None:
+        super().__init__(seed)
+        self.action_mode = mode
+        self.style = style
+        self.name = f"{mode}_{style}_reply"
+
+    def reset(self, env: gym.Env[Any, Any], info: dict[str, Any]) -> None:
+        super().reset(env, info)
+        self.k = 0
+
+    def act(self, obs: dict[str, Any], info: dict[str, Any]) -> str | None:
+        self.k += 1
+        if self.style == "garbage":
+            return "".join(self.rng.choice(GarbageReplyAgent.ALPHABET, int(self.rng.integers(1, 400))))
+        if self.style == "empty":
+            return ""
+        if self.style == "none":
+            return None
+        if self.style == "huge":
+            tail = "\n" + self.expert_reply() if self.k % 2 else ""
+            return HugeReplyAgent.FILLER[: MEGABYTE - len(tail)] + tail
+        bad: list[str | None] = [
+            "waypoints: [(nan, inf), (1e999, -1e999)]",
+            "waypoints: [(5.0, 0.0)]",
+            "waypoints: []",
+            "path_action: TURN_LEFT",
+            "speed_action: STOP",
+            "path_action: FLY\nspeed_action: WARP",
+            "steer: 0.1\ntarget_speed_mps: 5",
+            "I would keep my lane and slow down a little.",
+            None,
+        ]
+        if self.rng.random() < 0.5:
+            return self.expert_reply()
+        return bad[int(self.rng.integers(0, len(bad)))]
+
+
+def _plan_kinds() -> dict[str, Any]:
+    kinds: dict[str, Any] = {
+        "waypoints_huge": HugePlanAgent,
+        "waypoints_zero": ZeroPlanAgent,
+    }
+    for mode in ("waypoints", "meta"):
+        kinds[f"{mode}_random"] = lambda seed, m=mode: RandomPlanAgent(m, seed)
+        kinds[f"{mode}_non_finite"] = lambda seed, m=mode: NonFinitePlanAgent(m, seed)
+        for style in ("garbage", "empty", "huge", "none", "mixed"):
+            kinds[f"{mode}_{style}_reply"] = lambda seed, m=mode, st=style: PlanReplyAgent(m, st, seed)
+    return kinds
+
+
+# The bad drivers of the waypoint and meta levels (tests/fuzz/test_plan_fuzz.py).
+PLAN_KINDS: tuple[str, ...] = tuple(_plan_kinds())
+
+
 def _kinds() -> dict[str, Any]:
     return {
         "random": RandomAgent,
@@ -262,9 +402,10 @@ KINDS: tuple[str, ...] = tuple(_kinds())
 
 def make_bad_agent(kind: str, seed: int = 0) -> Any:
     """A bad driver by name (`KINDS`)."""
-    factories = _kinds()
+    factories = {**_kinds(), **_plan_kinds()}
     if kind not in factories:
-        raise ConfigError(f"config `agent` = {kind!r}: unknown bad driver (known: {', '.join(KINDS)})")
+        known = ", ".join([*KINDS, *PLAN_KINDS])
+        raise ConfigError(f"config `agent` = {kind!r}: unknown bad driver (known: {known})")
     return factories[kind](seed)
 
 

@@ -27,6 +27,15 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         )
         p.add_argument("--out", type=Path, required=True, help="output directory (resumable)")
         p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
+        p.add_argument(
+            "--action-level",
+            choices=["control", "waypoints", "meta"],
+            default="control",
+            help="what the agent decides: control = the paper's [steer, target speed] (default); "
+            "waypoints = 8 ego-frame points 0.5 s apart for the waypoint tracker; meta = a path "
+            "action x a speed action. waypoints and meta are this project's extension of the "
+            "protocol (docs/r4.md#action-levels)",
+        )
         p.add_argument("--frames", action="store_true", help="save front and BEV PNGs of every decision")
         p.add_argument("--video", action="store_true", help="save an animated GIF of the front camera")
         p.add_argument("--progress", action="store_true", help="progress bar on stderr (default: on a TTY)")
@@ -202,6 +211,7 @@ def _opts(args: argparse.Namespace) -> runner.RunOptions:
         progress=args.progress or sys.stderr.isatty(),
         worker_timeout_s=_worker_timeout(getattr(args, "worker_timeout", 600.0)),
         force=args.force,
+        action_level=args.action_level,
     )
 
 

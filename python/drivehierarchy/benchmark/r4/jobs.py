@@ -54,6 +54,23 @@ class RunOptions:
     # Redo every requested scenario even if `results.jsonl` has it (a changed scenario file is
     # refused without it).
     force: bool = False
+    # The level the agent decides at (`--action-level`): "control" (the paper's protocol), or this
+    # project's extensions "waypoints" and "meta" (docs/r4.md#action-levels). Sets the env's
+    # `action_mode`; recorded in the manifest and part of a run's identity.
+    action_level: str = "control"
+
+    def __post_init__(self) -> None:
+        from drivehierarchy.envs.config import ACTION_LEVELS
+
+        if self.action_level not in ACTION_LEVELS:
+            raise ConfigError(
+                f"config `action_level` = {self.action_level!r}: expected one of {', '.join(ACTION_LEVELS)}"
+            )
+        mode = ACTION_LEVELS[self.action_level]
+        # The control level is the paper's decision, or the raw control of an RL policy.
+        control = self.action_level == "control" and self.config.action_mode in ("decision", "raw")
+        if self.config.action_mode != mode and not control:
+            self.config = self.config.replace(action_mode=mode)
 
     def seed_list(self) -> list[int]:
         if self.seeds < 1:
@@ -65,21 +82,15 @@ class RunOptions:
         ident: dict[str, Any] = {"agent": self.agent, "seeds": self.seed_list()}
         # Set controls only, so that directories of runs without them still resume.
         ident.update({k: v for k, v in self.controls().items() if k in ("conditions", "camera_fault")})
+        if self.action_level != "control":  # control-level manifests predate the key
+            ident["action_level"] = self.action_level
         if self.vlm is not None:
             m = self.vlm.manifest()
             ident["vlm"] = {k: m[k] for k in ("model", "decoding", "payload", "latency_aware")}
             if self.vlm.history.enabled:
                 # Only when used, so directories of runs from before history existed still resume.
                 ident["vlm"]["history"] = m["history"]
-        if self.action_level() != "control":
-            ident["action_level"] = self.action_level()
         return ident
-
-    def action_level(self) -> str:
-        """How the agent drives (`r4 report`'s level column): `control` is the paper's
-        `[steer, target_speed]` decision (and the raw control of RL agents)."""
-        mode = str(self.config.action_mode)
-        return "control" if mode in ("decision", "raw") else mode
 
     def inputs(self) -> dict[str, Any]:
         """What the agent is given beyond the paper's one turn (`r4 report`'s input columns)."""
@@ -90,7 +101,7 @@ class RunOptions:
 
     def run_facts(self) -> dict[str, Any]:
         """Recorded in the manifest, every results line and the summary."""
-        return {"action_level": self.action_level(), "inputs": self.inputs()}
+        return {"action_level": self.action_level, "inputs": self.inputs()}
 
     def model_name(self) -> str:
         return str(self.vlm.served_model) if self.vlm is not None else self.agent

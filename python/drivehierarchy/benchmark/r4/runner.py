@@ -149,6 +149,13 @@ async def evaluate_async(
         raise ConfigError("config `agent` = 'vlm': needs a server (--base-url and --model)")
     if not is_vlm:
         AGENTS.create(opts.agent)  # unknown names fail before anything is written
+    if opts.action_level != "control" and not (
+        is_vlm or opts.agent == "expert" or opts.agent.startswith("sb3:")
+    ):
+        raise ConfigError(
+            f"config `agent` = {opts.agent!r}: decides at the control level only; --action-level "
+            f"{opts.action_level} takes expert, vlm or an sb3: policy trained at that level"
+        )
     jobs = jobs_for(scenarios, opts.seed_list())
     # Every scenario is loaded (a bad file fails here, before anything is written) and its traffic
     # resolved as the env will run it.

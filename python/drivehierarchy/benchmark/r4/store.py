@@ -126,6 +126,8 @@ def write_manifest(out: Path, jobs: list[Job], opts: RunOptions) -> None:
         "seeds": opts.seed_list(),
         "identity": opts.identity(),
         "vlm": opts.vlm.manifest() if opts.vlm is not None else None,
+        # action_level: "control" is the paper's protocol; "waypoints" and "meta" are this
+        # project's extension. inputs: history and memory beyond the paper's one turn.
         **opts.run_facts(),
         "controls": opts.controls(),
         "jobs": opts.jobs,

@@ -232,6 +232,8 @@ async def drive_vlm_scene(
                     **history_log,
                     **reply.log_fields(),
                 }
+                # Waypoint and meta levels: the plan applied and how the tracker followed it.
+                entry.update({k: rep[k] for k in ("plan", "tracking") if k in rep})
                 dlog.write(json.dumps(entry, sort_keys=True) + "\n")
                 dlog.flush()
                 if stats.consecutive_transport >= vopts.max_consecutive_transport_failures:
