@@ -273,3 +273,27 @@ def test_relation_and_region_rules() -> None:
     assert r2.region(1599, 511, (1600, 900)) == "middle-right"
     assert r2.transition_text("moving", "stopped") == "It transitions from moving to stopped"
     assert r2.clear_state("Vehicle", "moving", 0.5) is None
+
+
+def test_outcome_needs_a_cue_in_the_frame() -> None:
+    cue = r3.frame_cue
+    car = _actor(yaw=0.0)
+    # A turn or lane change without an indicator or a swung heading: straight fits the frame too.
+    assert not cue(r3.TURN_RIGHT, car, 0.0, 0.0)
+    assert not cue(r3.LANE_LEFT, car, 0.0, 0.0)
+    right, left = _actor(blinkers=r3.BLINKER_RIGHT), _actor(blinkers=r3.BLINKER_LEFT)
+    assert cue(r3.TURN_RIGHT, right, 0.0, 0.0) and cue(r3.LANE_RIGHT, right, 0.0, 0.0)
+    assert not cue(r3.TURN_LEFT, right, 0.0, 0.0)  # the wrong side lit
+    assert not cue(r3.TURN_LEFT, _actor(blinkers=3), 0.0, 0.0)  # hazard lights
+    # The heading already swung 20° left over the last second: a left turn shows.
+    assert cue(r3.TURN_LEFT, _actor(yaw=math.radians(20)), 0.0, 0.0)
+    assert not cue(r3.TURN_RIGHT, _actor(yaw=math.radians(20)), 0.0, 0.0)
+    assert not cue(r3.LANE_LEFT, _actor(yaw=math.radians(20)), 0.0, 0.0)
+    # Oncoming: never a lane change, even with its indicator lit.
+    assert not cue(r3.LANE_LEFT, _actor(yaw=math.pi, blinkers=r3.BLINKER_LEFT), math.pi, 0.0)
+    assert cue(r3.TURN_LEFT, _actor(yaw=math.pi, blinkers=r3.BLINKER_LEFT), math.pi, 0.0)
+    # Stationary only when it shows standing; straight only with no indicator lit.
+    assert not cue(r3.STATIONARY, _actor(speed_mps=0.0), 0.0, 0.0)
+    assert cue(r3.STATIONARY, _actor(speed_mps=0.0, braking=True), 0.0, 0.0)
+    assert cue(r3.STATIONARY, _actor(speed_mps=0.0, motion="static"), 0.0, 0.0)
+    assert cue(r3.STRAIGHT, car, 0.0, 0.0) and not cue(r3.STRAIGHT, left, 0.0, 0.0)

@@ -22,7 +22,7 @@ from typing import Any
 
 from .quality import dropped, passed
 from .r2 import _balance_by, _finish, image_path, point_is_unique, sample_token, scene_token
-from .rollout import FRONT, WHOLE_FIGURE, Moment, Needs, register
+from .rollout import BLINKER_LEFT, BLINKER_RIGHT, DECISION_HZ, FRONT, WHOLE_FIGURE, Moment, Needs, register
 
 HORIZON_S = 3.0
 # Actors farther than this are a few pixels wide: not asked about.
@@ -109,6 +109,35 @@ def vehicle_outcome(v0: float, yaw0: float, x0: float, y0: float, future: Sequen
     return None
 
 
+# A turn or lane change is asked only when the frame shows it coming: the vehicle's indicator on
+# that side is lit, or (turns) its heading has already swung by CUE_YAW_DEG over the last
+# CUE_PAST_S toward that side, so it stands visibly askew to its lane. Without a cue, "keep going
+# straight" fits the frame as well. An oncoming vehicle (heading more than 90° from the ego's) is
+# never asked about a lane change: its left and right are the viewer's right and left.
+CUE_YAW_DEG = 15.0
+CUE_PAST_S = 1.0
+_LEFT_SIDE = {TURN_LEFT: True, LANE_LEFT: True, TURN_RIGHT: False, LANE_RIGHT: False}
+
+
+def frame_cue(outcome: str, a: Any, past_yaw: float | None, ego_yaw: float) -> bool:
+    """Whether the frame that shows vehicle `a` (an `ActorState`) gives a cue for `outcome`.
+    `past_yaw` is its heading CUE_PAST_S before the frame (None when unknown)."""
+    lit_left, lit_right = bool(a.blinkers & BLINKER_LEFT), bool(a.blinkers & BLINKER_RIGHT)
+    if outcome in _LEFT_SIDE:
+        left = _LEFT_SIDE[outcome]
+        if outcome in (LANE_LEFT, LANE_RIGHT) and abs(_wrap_deg(a.yaw - ego_yaw)) > 90.0:
+            return False
+        if lit_left != lit_right and lit_left == left:
+            return True
+        swung = _wrap_deg(a.yaw - past_yaw) if past_yaw is not None else 0.0
+        return outcome in (TURN_LEFT, TURN_RIGHT) and abs(swung) >= CUE_YAW_DEG and (swung > 0) == left
+    if lit_left or lit_right:
+        return False  # an indicator lit: a turn or lane change fits the frame too
+    if outcome == STATIONARY:
+        return a.braking or a.motion == "static"
+    return True
+
+
 def pedestrian_outcome(v0: float, yaw0: float, future: Sequence[Any]) -> str | None:
     speeds = [s.speed_mps for s in future]
     if max(v0, *speeds) < 0.2:
@@ -117,6 +146,14 @@ def pedestrian_outcome(v0: float, yaw0: float, future: Sequence[Any]) -> str | N
     if min(v0, *speeds) >= 0.8 and abs(dyaw) < 15.0:
         return STRAIGHT
     return None
+
+
+def _past_yaw(m: Moment, actor_id: int) -> float | None:
+    k = m.step - round(CUE_PAST_S * DECISION_HZ)
+    if k < 0:
+        return None
+    past = m.rollout.states[k][2].get(actor_id)
+    return None if past is None else past.yaw
 
 
 @register("R3_1", Needs())
@@ -149,6 +186,9 @@ def build_r3_1(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
             else:
                 outcome = vehicle_outcome(a.speed_mps, a.yaw, a.x, a.y, future)
                 pool = DISTRACTORS.get(outcome or "", ())
+                if outcome is not None and not frame_cue(outcome, a, _past_yaw(m, a.id), m.ego.yaw):
+                    dropped("no cue in the frame for the vehicle's next move")
+                    continue
             if outcome is None:
                 dropped("motion near a class boundary")
                 continue

@@ -140,6 +140,11 @@ class EgoState:
     speed_mps: float
 
 
+# `ActorState.blinkers` bits (env/src/view.rs): the indicators lit in the frame.
+BLINKER_RIGHT = 1
+BLINKER_LEFT = 2
+
+
 @dataclass(frozen=True)
 class ActorState:
     """One actor at one decision. `status` uses the original's vocabulary: vehicles `moving`,
