@@ -226,3 +226,12 @@ def test_review_verdicts_are_recorded_beside_the_sheet(tmp_path: Path) -> None:
     assert [r["verdict"] for r in data["records"]] == ["correct", "wrong"]
     table = run("--table").stdout
     assert "| R2_3 | 0 | 1 | 0 | 0 | 0 |" in table and "review seed 3" in table
+
+
+def test_bucket_edge_dead_band() -> None:
+    # ±10 % around 20 m and 50 m: no bucket with that edge is asked about.
+    assert r1.in_edge_band(18.5, 0.0, 20.0) and r1.in_edge_band(21.9, 20.0, 50.0)
+    assert r1.in_edge_band(46.0, 20.0, 50.0) and r1.in_edge_band(54.0, 50.0, math.inf)
+    assert not r1.in_edge_band(17.0, 0.0, 20.0) and not r1.in_edge_band(35.0, 20.0, 50.0)
+    assert not r1.in_edge_band(46.0, 0.0, 20.0)  # another bucket's edge: Near is still clear
+    assert not r1.in_edge_band(56.0, 50.0, math.inf)

@@ -31,8 +31,17 @@ STATUS_OPTIONS = {
     "Pedestrian": ("moving", "standing"),
 }
 BUCKETS = (("Near", "<20m", 0.0, 20.0), ("Mid", "20-50m", 20.0, 50.0), ("Far", ">50m", 50.0, math.inf))
-# Distances this close to a bucket edge are not asked about (the edge must be clear-cut).
-BUCKET_MARGIN_M = 1.5
+# A dead band around each bucket edge: an object within ±BUCKET_MARGIN (a fraction of the edge,
+# 18–22 m around 20 m, 45–55 m around 50 m) may be read on either side of it by eye, so no
+# question is asked about a bucket with that edge in that image.
+BUCKET_MARGIN = 0.10
+
+
+def in_edge_band(d: float, lo: float, hi: float) -> bool:
+    """Whether distance `d` lies in the dead band of an edge of bucket [lo, hi)."""
+    return any(e > 0 and math.isfinite(e) and abs(d - e) <= BUCKET_MARGIN * e for e in (lo, hi))
+
+
 # A nearest object must be this much nearer than the next one of its class.
 NEAREST_MARGIN_M = 2.0
 # Objects referred to by a point or a description: near enough to be seen clearly.
@@ -382,11 +391,10 @@ def r1_2_c(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
                 quality.dropped("an object of the class in the dead band")
                 continue
             vis = f.visible_of(cat)
-            edges = [lo for _, _, lo, _ in BUCKETS[1:]]
-            if any(abs(v.distance_m - e) < BUCKET_MARGIN_M for v in vis for e in edges):
-                quality.dropped("an object within 1.5 m of a bucket edge")
-                continue
             for name, label, lo, hi in BUCKETS:
+                if any(in_edge_band(v.distance_m, lo, hi) for v in vis):
+                    quality.dropped("an object within 10 % of the bucket's edge")
+                    continue
                 inside = [v for v in vis if lo <= v.distance_m < hi]
                 rec = _order(
                     {
