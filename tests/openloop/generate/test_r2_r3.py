@@ -297,3 +297,21 @@ def test_outcome_needs_a_cue_in_the_frame() -> None:
     assert cue(r3.STATIONARY, _actor(speed_mps=0.0, braking=True), 0.0, 0.0)
     assert cue(r3.STATIONARY, _actor(speed_mps=0.0, motion="static"), 0.0, 0.0)
     assert cue(r3.STRAIGHT, car, 0.0, 0.0) and not cue(r3.STRAIGHT, left, 0.0, 0.0)
+
+
+def test_no_vehicle_count_with_a_bicycle_shown(moments, records) -> None:
+    # A bicycle may or may not be a "vehicle" to a reader: vehicle counts are not asked beside one.
+    for task in ("R2_1", "R2_2_A"):
+        assert records[task]
+        assert not any(r2.cyclist_shown(r["_frames"]) for r in records[task]), task
+    from drivehierarchy.benchmark.openloop.generate.rollout import Frame, Visible
+
+    bike = _actor(kind="bicycle", category="Bicycle", subtype="bicycle", speed_mps=4.0)
+    car = _actor()
+
+    def frame(*actors: ActorState) -> Frame:
+        vis = [Visible(a, (10, 10, 90, 90), (50, 50), 15.0, 1.0, 4000, 4000) for a in actors]
+        return Frame("CAM_FRONT", 0, 0.0, (1600, 900), b"", vis)
+
+    assert r2.cyclist_shown([frame(car), frame(car, bike)])
+    assert not r2.cyclist_shown([frame(car), frame()])

@@ -142,6 +142,13 @@ def _ambiguous_ids(frames: Iterable[Frame], categories: Sequence[str]) -> tuple[
     return clear, unclear - clear
 
 
+def cyclist_shown(frames: Iterable[Frame]) -> bool:
+    """A bicycle shows (clearly or in the dead band) in one of `frames`: a person may count it
+    among "vehicles" (nuScenes does) while the answer, like the original's, counts motor
+    vehicles only, so no vehicle count is asked (as R1's `_clear`)."""
+    return any(f.blocking("Bicycle") or any(v.actor.category == "Bicycle" for v in f.visible) for f in frames)
+
+
 def _distribution(values: Iterable[str]) -> dict[str, int]:
     out: dict[str, int] = {}
     for v in values:
@@ -202,6 +209,9 @@ def build_r2_1(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
         if unclear:
             dropped("a vehicle shown only in the dead band")
             continue
+        if cyclist_shown(frames):  # type: ignore[arg-type]
+            dropped("a bicycle shown: is it a vehicle?")
+            continue
         seen_in: dict[int, list[str]] = {}
         actor_of: dict[int, Visible] = {}
         fraction: dict[str, dict[str, float]] = {}
@@ -260,6 +270,9 @@ def build_r2_2_a(moments: Sequence[Moment], n: int, rng: random.Random) -> list[
         clear, unclear = _ambiguous_ids(clip, VEHICLE_CATEGORIES)
         if unclear:
             dropped("a vehicle shown only in the dead band")
+            continue
+        if cyclist_shown(clip):
+            dropped("a bicycle shown: is it a vehicle?")
             continue
         actor_of = {v.actor.id: v for f in clip for v in f.visible if v.actor.id in clear}
         window = R2_2_A_FRAMES / 2.0
