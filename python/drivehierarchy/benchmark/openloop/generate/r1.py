@@ -351,6 +351,12 @@ def _point_target(f: Frame, v: Visible) -> bool:
     )
 
 
+# R1_2_B draws evenly over distance bands (doubling, as the scorer's log error) within each
+# asked class: the class is in the question, and with each class's own spread (people near,
+# vehicles far) a text-only rule guessing one distance per class scored far above chance.
+R1_2_B_BANDS_M = (8.0, 16.0, 32.0, 64.0, math.inf)
+
+
 @register("R1_2_B", needs=Needs())
 def r1_2_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str, Any]]:
     groups: dict[str, list[Any]] = {}
@@ -376,7 +382,8 @@ def r1_2_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
                     "original_subtask_id": "L1-2-B",
                 }
             )
-            groups.setdefault(v.actor.category, []).append((rec, [f]))
+            band = next(i for i, hi in enumerate(R1_2_B_BANDS_M) if v.distance_m < hi)
+            groups.setdefault((v.actor.category, band), []).append((rec, [f]))
     quality.passed(sum(len(v) for v in groups.values()))
     chosen = quality.balance_groups(groups, n, rng)
     return _finish([c[0] for c in chosen], "R1_2_B", [c[1] for c in chosen])

@@ -425,13 +425,13 @@ def build_r2_2_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[
             }
             cands.append((rec, answer))
     passed(len(cands))
-    # Balanced within each asked class (the class is in the question).
-    from .quality import balance_within_classes, letter_options
+    # Balanced within each question template (the asked class and region words, numbers blanked):
+    # what a text-only rule learns its commonest answer for.
+    from .quality import balance_within_classes, letter_options, template
 
     by: dict[str, dict[str, list[Any]]] = {}
     for rec, answer in cands:
-        cls = rec["meta_data"]["start_attribute"].split(".")[0]
-        by.setdefault(cls, {}).setdefault(answer, []).append((rec,))
+        by.setdefault(template(rec["question"]), {}).setdefault(answer, []).append((rec,))
     # Tighter than the task-wide cap: a question's region words would otherwise let a text-only
     # rule pick the commonest state per region.
     picked = [c[0] for c in balance_within_classes(by, n, rng, max_share=R2_2_B_MAX_SHARE)]
