@@ -48,7 +48,9 @@ MINI = [
 SCALE: list[tuple[str, str]] = [
     (r"--suite builtin", "--suite mini"),
     (r"--jobs 16", "--jobs 2"),
-    (r"--episodes 70", "--episodes 2"),
+    (r"--episodes \d+", "--episodes 2"),
+    # PPO without a step count would train for its default budget.
+    (r"train ppo (?!.*--steps)", "train ppo --steps 64 "),
     (r"--steps \d+", "--steps 64"),
     (r"--envs \d+", "--envs 1"),
     (r"train (bc|dagger) ", r"train \1 --epochs 1 --iterations 1 "),
