@@ -359,7 +359,7 @@ R1_2_B_BANDS_M = (8.0, 16.0, 32.0, 64.0, math.inf)
 
 @register("R1_2_B", needs=Needs())
 def r1_2_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str, Any]]:
-    groups: dict[str, list[Any]] = {}
+    groups: dict[tuple[str, int], list[Any]] = {}
     for m, f in _front_frames(moments):
         for v in f.visible:
             if v.actor.category not in CATEGORIES or v.distance_m > MAX_TARGET_M or not _point_target(f, v):

@@ -134,7 +134,7 @@ def frame_cue(outcome: str, a: Any, past_yaw: float | None, ego_yaw: float) -> b
     if lit_left or lit_right:
         return False  # an indicator lit: a turn or lane change fits the frame too
     if outcome == STATIONARY:
-        return a.braking or a.motion == "static"
+        return bool(a.braking or a.motion == "static")
     return True
 
 
