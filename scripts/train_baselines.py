@@ -4,7 +4,7 @@ generates its results table.
     python scripts/train_baselines.py --out runs/baselines            # train + evaluate + table
     python scripts/train_baselines.py --out runs/baselines --docs docs/baselines.md
     python scripts/train_baselines.py --table-only --docs docs/baselines.md   # from the committed CSVs
-    python scripts/train_baselines.py --quick --out /tmp/bl    # CI smoke run: 3 scenarios, tiny budgets
+    python scripts/train_baselines.py --quick --out runs/bl_quick  # CI smoke run: 3 scenarios, tiny budgets
 
 Two splits (`drivehierarchy.baselines.splits`): `seeds` trains on all 100 suite files at seeds
 ≥ 100 000 and tests on seeds 0–4 of all of them (the benchmark); `scenarios` trains on 70 files
