@@ -3,7 +3,9 @@
 `Sb3Agent("runs/ppo/model.zip")`, or `drivehierarchy r4 evaluate --agent sb3:runs/ppo/model.zip`.
 The archive carries the `WrapperConfig` the policy was trained with, and the agent applies the
 same observation and action mapping to the plain env, so the policy is scored by the same
-harness (and the same actuation bridge) as the expert and the VLMs.
+harness (and the same actuation bridge) as the expert and the VLMs. The archive also says the
+action level the policy decides at (control, waypoints or meta): `r4 evaluate` drives the model at
+that level without being told, and refuses another `--action-level` (`model_level`).
 
 Security: loading an archive unpickles Python objects from it (Stable-Baselines3's `load`), which
 can execute arbitrary code. Only load model files you trust (ones you trained, or from a source
@@ -38,18 +40,42 @@ class Sb3Agent:
         self.uses_images = self.wrapper.uses_images
 
     def reset(self, env: gym.Env[Any, Any], info: dict[str, Any]) -> None:
-        mode = getattr(env.unwrapped, "config", None)
-        mode = getattr(mode, "action_mode", None)
-        if mode is not None and mode != self.wrapper.action:
+        config = getattr(env.unwrapped, "config", None)
+        mode = getattr(config, "action_mode", None)
+        if mode is not None and mode != self.wrapper.env_action_mode:
             raise ConfigError(
                 f"config `action_mode` = {mode!r}: the model {self.path} was trained with "
-                f"action mode {self.wrapper.action!r}"
+                f"action mode {self.wrapper.env_action_mode!r} (action level {self.wrapper.action_level!r})"
             )
+        if mode == "waypoints":
+            plan = (config.waypoints, config.waypoint_dt_s)  # type: ignore[union-attr]
+            trained = (self.wrapper.waypoints, self.wrapper.waypoint_dt_s)
+            if plan != trained:
+                raise ConfigError(
+                    f"config `waypoints`/`waypoint_dt_s` = {plan!r}: the model {self.path} plans "
+                    f"{trained[0]} points {trained[1]} s apart"
+                )
 
     def act(self, observation: dict[str, Any], info: dict[str, Any]) -> np.ndarray:
         obs = self.obs_codec.encode(observation)
         action, _ = self.model.predict(obs, deterministic=self.deterministic)
         return self.action_codec.decode(action)
+
+
+def model_level(path: str | Path, asked: str | None = None) -> tuple[str, str]:
+    """(action level, env action mode) the model at `path` was trained at, read from its archive
+    without loading the policy. `asked`: the level the user asked for (None = the model's); a
+    different one is a `ConfigError` naming the model's."""
+    from drivehierarchy.baselines.model_io import read_meta
+    from drivehierarchy.baselines.wrappers import WrapperConfig
+
+    wrapper = WrapperConfig.from_dict(read_meta(Path(path))["wrapper"])
+    if asked is not None and asked != wrapper.action_level:
+        raise ConfigError(
+            f"config `action_level` = {asked!r}: the model {path} decides at the "
+            f"{wrapper.action_level!r} level (leave out --action-level to drive it there)"
+        )
+    return wrapper.action_level, wrapper.env_action_mode
 
 
 @lru_cache(maxsize=8)

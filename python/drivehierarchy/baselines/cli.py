@@ -14,6 +14,7 @@ from typing import Any
 
 from drivehierarchy._core import ConfigError
 from drivehierarchy.baselines.splits import Split
+from drivehierarchy.envs.config import ACTION_LEVELS
 from drivehierarchy.envs.traffic.modes import TRAFFIC_MODES, traffic_mode_arg
 
 
@@ -38,6 +39,16 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         )
         p.add_argument("--seed", type=int, default=0)
 
+    def level_arg(p: argparse.ArgumentParser, default: str | None, extra: str = "") -> None:
+        p.add_argument(
+            "--action-level",
+            choices=list(ACTION_LEVELS),
+            default=default,
+            help="what the policy decides: control = [steer, target speed] (the paper's), waypoints = "
+            "8 ego-frame points 0.5 s apart for the waypoint tracker, meta = a path action x a speed "
+            "action (docs/r4.md#action-levels)" + extra,
+        )
+
     col = cmds.add_parser("collect", help="record expert demonstrations as a Minari dataset")
     col.add_argument("--agent", default="expert", help="demonstrator (only 'expert')")
     col.add_argument("--episodes", type=int, required=True, help="episodes, scenarios taken in turn")
@@ -48,6 +59,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         default=1.0,
         help="σ of DART-style action noise on every other episode (0 = none)",
     )
+    level_arg(col, "control", "; the label is the expert's plan at this level")
     suite_args(col)
     col.set_defaults(func=_collect)
 
@@ -81,7 +93,18 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     tr.add_argument("--obs", default="state", choices=["state", "bev", "state+bev"])
     tr.add_argument("--bev-size", type=int, default=128, help="side of the BEV image (obs bev, state+bev)")
-    tr.add_argument("--action", default="decision", choices=["decision", "raw"])
+    tr.add_argument(
+        "--action",
+        default="decision",
+        choices=["decision", "raw"],
+        help="control level: the protocol's decision, or raw pedals and steering",
+    )
+    level_arg(
+        tr,
+        None,
+        "; recorded in model.zip, so `r4 evaluate --agent sb3:` drives at it. Default: the "
+        "--data's level (bc, dagger), else control",
+    )
     tr.add_argument("--reward", default="shaped", choices=["shaped", "score"], help="training reward")
     tr.add_argument("--max-speed", type=float, default=16.0, help="target speed at a[1] = +1 (m/s)")
     tr.add_argument(
@@ -120,7 +143,14 @@ def _collect(args: argparse.Namespace) -> int:
 
     split = split_from_args(args)
     imitation.collect(
-        split, args.episodes, args.out, agent=args.agent, noise=args.noise, seed=args.seed, log=_log
+        split,
+        args.episodes,
+        args.out,
+        agent=args.agent,
+        noise=args.noise,
+        seed=args.seed,
+        action_level=args.action_level,
+        log=_log,
     )
     (args.out / "split.json").write_text(json.dumps(split.to_dict(), indent=2) + "\n", encoding="utf-8")
     return 0
@@ -146,6 +176,14 @@ def _train(args: argparse.Namespace) -> int:
 
     torch.set_num_threads(max(1, args.threads))
     split = split_from_args(args)
+    level: dict[str, Any] = {"action_level": args.action_level or "control"}
+    if args.data is not None and args.algo in ("bc", "dagger"):
+        from drivehierarchy.baselines.imitation import demos_level
+
+        have = demos_level(args.data)
+        # The demonstrations' level (and plan shape) unless one is asked for; a different one
+        # is refused by the trainer with the dataset's file named.
+        level = have if args.action_level in (None, have["action_level"]) else level
     wrapper = WrapperConfig(
         action=args.action,
         max_speed_mps=args.max_speed,
@@ -153,6 +191,7 @@ def _train(args: argparse.Namespace) -> int:
         bev_size=args.bev_size,
         reward=args.reward,
         traffic=args.traffic,
+        **level,
     )
     if args.algo in ("ppo", "sac"):
         from drivehierarchy.baselines.rl import train_rl

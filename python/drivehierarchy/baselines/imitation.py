@@ -9,6 +9,12 @@ Demonstrations: `collect` drives the privileged expert over a suite and records 
 action the executed env action; each step's `infos["expert_action"]` is the expert's label for the
 observation it comes with (so with `--noise`, DART-style perturbed driving is recorded together
 with clean labels, which shows the learner how to recover from its own small errors).
+
+At the waypoint and meta levels (`action_level`, docs/r4.md#action-levels) the env takes the
+level's plans and the label is the expert's plan at that level (`env.expert_action()`, the
+level's oracle); the dataset's level is recorded in `collect.json`, and BC / DAgger on it must
+train at the same level. Meta actions are classes, so BC and DAgger fit them by cross-entropy
+(the policy's log-likelihood of the expert's pair) instead of the squared error of the Box levels.
 """
 
 from __future__ import annotations
@@ -41,12 +47,16 @@ class ExpertLabels(gym.Wrapper[Any, Any, Any, Any]):
     def __init__(self, env: gym.Env[Any, Any]) -> None:
         super().__init__(env)
         self.last_score: dict[str, Any] | None = None
+        # Meta labels are class indices; the Box levels' labels float32, as before the levels.
+        self._dtype: type[np.generic] = (
+            np.int64 if isinstance(env.action_space, gym.spaces.MultiDiscrete) else np.float32
+        )
 
     def _info(self, info: dict[str, Any], terminated: bool) -> dict[str, Any]:
         label = (
-            np.zeros(self.env.action_space.shape, np.float32)  # type: ignore[type-var]
+            np.zeros(self.env.action_space.shape or (), self._dtype)
             if terminated
-            else np.asarray(self.env.unwrapped.expert_action(), np.float32)  # type: ignore[attr-defined]
+            else np.asarray(self.env.unwrapped.expert_action(), self._dtype)  # type: ignore[attr-defined]
         )
         return {
             "expert_action": label,
@@ -69,6 +79,11 @@ def _minari_root(out: Path) -> None:
     os.environ["MINARI_DATASETS_PATH"] = str(Path(out).resolve())
 
 
+def level_config(action_level: str) -> R4Config:
+    """The state-only env of the demonstrations at `action_level`."""
+    return WrapperConfig(action_level=action_level).env_config(STATE_ONLY)  # type: ignore[arg-type]
+
+
 def collect(
     split: Split,
     episodes: int,
@@ -77,15 +92,20 @@ def collect(
     agent: str = "expert",
     noise: float = 0.0,
     seed: int = 0,
+    action_level: str = "control",
     log: Any = print,
 ) -> Any:
     """Drives `episodes` episodes (the split's training scenarios in turn, at seeds drawn from its
-    training seeds) and writes a Minari dataset under `out`.
+    training seeds) and writes a Minari dataset under `out`, the expert deciding at
+    `action_level` (its plan at that level is both what is driven and the label).
 
-    `noise` > 0: the executed action is the expert's plus Gaussian noise (σ·[0.1 steer,
-    2 m/s speed]) on every other episode; labels stay the expert's."""
+    `noise` > 0: the executed action is the expert's plus DART noise (`ActionCodec.perturb`:
+    σ·[0.1 steer, 2 m/s speed] at the control level) on every other episode; labels stay the
+    expert's."""
     import minari
 
+    config = level_config(action_level)
+    codec = ActionCodec(WrapperConfig(action_level=action_level))  # type: ignore[arg-type]
     if agent != "expert":
         raise ConfigError(f"config `agent` = {agent!r}: demonstrations come from the privileged 'expert'")
     if episodes < 1:
@@ -95,11 +115,10 @@ def collect(
     if (out / DATASET_ID).exists():
         raise ConfigError(f"config `out` = {str(out)!r}: a dataset {DATASET_ID} already exists there")
     scenarios = split.train_paths
-    base = SuiteEnv(scenarios, STATE_ONLY, order="cycle", train_seeds=split.train_seeds)
+    base = SuiteEnv(scenarios, config, order="cycle", train_seeds=split.train_seeds)
     labelled = ExpertLabels(base)
     env = minari.DataCollector(labelled, record_infos=True)
     rng = np.random.default_rng(seed)
-    scale = np.array([0.1, 2.0], np.float32)
     scores: list[float] = []
     played: list[int] = []
     t0 = time.perf_counter()
@@ -108,10 +127,9 @@ def collect(
         played.append(int(base.episode_seed or 0))
         noisy = noise > 0 and ep % 2 == 1
         while True:
-            a = np.asarray(info["expert_action"], np.float32)
+            a = np.asarray(info["expert_action"])
             if noisy:
-                a = a + rng.normal(0.0, noise, 2).astype(np.float32) * scale
-                a = np.clip(a, base.action_space.low, base.action_space.high)  # type: ignore[attr-defined]
+                a = codec.perturb(a, rng, noise)
             _obs, _, terminated, truncated, info = env.step(a)
             if terminated or truncated:
                 break
@@ -126,8 +144,9 @@ def collect(
             + (f", noise {noise}" if noise else ""),
             author="drivehierarchy",
             description=(
-                "DriveHierarchy-R4 expert demonstrations: observations {'state'}, actions [steer, "
-                "target_speed_mps], infos['expert_action'] = the expert's label for each observation. "
+                "DriveHierarchy-R4 expert demonstrations: observations {'state'}, actions "
+                f"{LEVEL_ACTIONS[action_level]} (action level {action_level!r}), "
+                "infos['expert_action'] = the expert's label for each observation. "
                 f"Scenarios: {', '.join(str(p) for p in scenarios)}"
             ),
         )
@@ -136,6 +155,9 @@ def collect(
         json.dumps(
             {
                 "dataset_id": DATASET_ID,
+                "action_level": action_level,
+                "waypoints": config.waypoints,
+                "waypoint_dt_s": config.waypoint_dt_s,
                 "episodes": episodes,
                 "noise": noise,
                 "split": split.to_dict(),
@@ -155,6 +177,42 @@ def collect(
     return dataset
 
 
+LEVEL_ACTIONS = {
+    "control": "[steer, target_speed_mps]",
+    "waypoints": "(K, 2) ego-frame waypoints (x forward, y left, metres)",
+    "meta": "[path action, speed action] indices",
+}
+
+
+def demos_level(data: Path) -> dict[str, Any]:
+    """The action level (and waypoint shape) a dataset was collected at (`collect.json`;
+    datasets from before the levels are the control level)."""
+    path = Path(data) / "collect.json"
+    meta = json.loads(path.read_text(encoding="utf-8")) if path.is_file() else {}
+    default = R4Config()
+    return {
+        "action_level": meta.get("action_level", "control"),
+        "waypoints": meta.get("waypoints", default.waypoints),
+        "waypoint_dt_s": meta.get("waypoint_dt_s", default.waypoint_dt_s),
+    }
+
+
+def check_demos_level(data: Path, wrapper: WrapperConfig) -> None:
+    """Refuses demonstrations of another level (or another waypoint plan) than the learner's."""
+    have = demos_level(data)
+    want = {k: getattr(wrapper, k) for k in have}
+    if wrapper.action_level != "waypoints":
+        for k in ("waypoints", "waypoint_dt_s"):
+            have.pop(k), want.pop(k)
+    if have != want:
+        key = next(k for k in have if have[k] != want[k])
+        raise ConfigError(
+            f"{Path(data) / 'collect.json'}: field `{key}` = {have[key]!r}: the demonstrations are "
+            f"at {have[key]!r} but this run trains at {want[key]!r} (pass --action-level "
+            f"{have['action_level']} or collect at {want['action_level']})"
+        )
+
+
 def load_demos(data: Path) -> tuple[np.ndarray, np.ndarray]:
     """(raw states, expert env actions) of every step of a collected dataset."""
     import minari
@@ -170,7 +228,8 @@ def load_demos(data: Path) -> tuple[np.ndarray, np.ndarray]:
     for ep in ds.iterate_episodes():
         n = len(ep.actions)
         states.append(np.asarray(ep.observations["state"][:n], np.float32))
-        labels.append(np.asarray(ep.infos["expert_action"][:n], np.float32))
+        label = np.asarray(ep.infos["expert_action"][:n])
+        labels.append(label if label.dtype.kind in "iu" else label.astype(np.float32))
     if not states:
         raise ConfigError(f"config `data` = {str(data)!r}: the dataset has no episode")
     return np.concatenate(states), np.concatenate(labels)
@@ -202,14 +261,18 @@ def fit(
     lr: float = 1e-3,
     seed: int = 0,
 ) -> float:
-    """Regresses the policy's mean action on the normalised labels (MSE); returns the last loss.
-    `x` is a batch of policy observations (states, or H×W×3 uint8 BEV images)."""
+    """Fits the policy to the labels; returns the last loss. Box actions (control, waypoints):
+    the policy's mean action regressed on the normalised labels (MSE); meta actions (integer
+    labels): the negative log-likelihood of the expert's (path, speed) pair under the policy's
+    categoricals (cross-entropy). `x` is a batch of policy observations (states, or H×W×3
+    uint8 BEV images)."""
     import torch as th
 
     policy = model.policy
     policy.set_training_mode(True)
     opt = th.optim.Adam(policy.parameters(), lr=lr)
-    yt = th.as_tensor(y)
+    classes = np.asarray(y).dtype.kind in "iu"
+    yt = th.as_tensor(y) if classes else th.as_tensor(y).reshape(len(y), -1)
     gen = th.Generator().manual_seed(seed)
     last = float("nan")
     for _ in range(epochs):
@@ -219,8 +282,11 @@ def fit(
             idx = perm[i : i + batch]
             # obs_to_tensor transposes images to the policy's channel-first layout.
             obs, _ = policy.obs_to_tensor(x[idx])
-            mean = policy.get_distribution(obs).distribution.mean
-            loss = th.mean((mean - yt[idx]) ** 2)
+            dist = policy.get_distribution(obs)
+            if classes:
+                loss = -th.mean(dist.log_prob(yt[idx]))
+            else:
+                loss = th.mean((dist.distribution.mean - yt[idx]) ** 2)
             opt.zero_grad()
             loss.backward()
             opt.step()
@@ -234,7 +300,7 @@ def fit(
 def _encode(wrapper: WrapperConfig, states: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     oc, ac = ObsCodec(wrapper), ActionCodec(wrapper)
     x = np.stack([oc.state(s) for s in states]).astype(np.float32)
-    y = np.stack([ac.encode(a) for a in labels]).astype(np.float32)
+    y = np.stack([ac.encode(a) for a in labels])
     return x, y
 
 
@@ -266,6 +332,7 @@ def train_bc(
     log: Any = print,
 ) -> Path:
     wrapper = _imitation_wrapper(wrapper)
+    check_demos_level(data, wrapper)
     t0 = time.perf_counter()
     states, labels = load_demos(data)
     x, y = _encode(wrapper, states, labels)
@@ -300,7 +367,6 @@ def _rollouts(
     returns (policy observations, normalised expert labels, S_R4 of each episode)."""
     oc, ac = ObsCodec(wrapper), ActionCodec(wrapper)
     rng = np.random.default_rng(seed)
-    scale = np.array([0.1, 2.0], np.float32)
     xs: list[Any] = []
     ys: list[np.ndarray] = []
     scores: list[float] = []
@@ -308,7 +374,7 @@ def _rollouts(
         obs, _ = env.reset(seed=seed + ep)  # seeds the draw of a training seed (train_seeds)
         noisy = noise > 0 and ep % 2 == 1
         while True:
-            expert = np.asarray(env.expert_action(), np.float32)
+            expert = np.asarray(env.expert_action())
             o = oc.encode(obs)
             xs.append(o)
             ys.append(ac.encode(expert))
@@ -318,13 +384,12 @@ def _rollouts(
                 a, _ = model.predict(o, deterministic=True)
                 act = ac.decode(a)
             if noisy:
-                act = act + rng.normal(0.0, noise, 2).astype(np.float32) * scale
-                act = np.clip(act, env.action_space.low, env.action_space.high)  # type: ignore[attr-defined]
+                act = ac.perturb(act, rng, noise)
             obs, _, terminated, truncated, _ = env.step(act)
             if terminated or truncated:
                 break
         scores.append(float(env.score()["score_composed"]))
-    return np.stack(xs), np.stack(ys).astype(np.float32), scores
+    return np.stack(xs), np.stack(ys), scores
 
 
 def train_dagger(
@@ -352,6 +417,8 @@ def train_dagger(
     (`rounds/model_NNN.zip`) are kept, so a killed run continues after its last whole round.
     `max_minutes` stops starting new rounds after that much wall time (the model is saved)."""
     wrapper = _imitation_wrapper(wrapper, images=True)
+    if data is not None:
+        check_demos_level(data, wrapper)
     if data is not None and wrapper.obs != "state":
         raise ConfigError(
             f"config `data` = {str(data)!r}: demonstrations record the state only; DAgger on "

@@ -176,8 +176,11 @@ def train_rl(
     if steps < 1:
         raise ConfigError(f"config `steps` = {steps!r}: expected ≥ 1")
     wrapper = wrapper or WrapperConfig()
-    if algo == "sac" and wrapper.obs != "state":
-        pass  # SAC's CNN/MultiInput policies work too; nothing to adjust
+    if algo == "sac" and wrapper.action_level == "meta":
+        raise ConfigError(
+            "config `action_level` = 'meta': SAC needs a continuous (Box) action space and meta "
+            "actions are MultiDiscrete; use ppo (or bc / dagger)"
+        )
     out.mkdir(parents=True, exist_ok=True)
     write_split(out, split, wrapper, algo)
     (out / "monitor").mkdir(exist_ok=True)
@@ -274,8 +277,9 @@ def _init_policy_kwargs(init: Path, algo: str, wrapper: WrapperConfig) -> dict[s
 
     meta = read_meta(init)
     # What the policy sees and answers must match; traffic and reward are training-only settings.
-    keys = ("obs", "action", "max_speed_mps", "bev_size")
-    theirs = {k: meta["wrapper"].get(k) for k in keys}
+    keys = ("obs", "action", "max_speed_mps", "bev_size", "action_level", "waypoints", "waypoint_dt_s")
+    theirs = WrapperConfig.from_dict(meta["wrapper"]).to_dict()  # older models: their defaults
+    theirs = {k: theirs[k] for k in keys}
     ours = {k: wrapper.to_dict()[k] for k in keys}
     if meta["algo"] != algo or theirs != ours:
         raise ConfigError(

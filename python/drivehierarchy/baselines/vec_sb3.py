@@ -12,6 +12,9 @@ and on the step an episode ends the env is reset at once (`autoreset_mode=DISABL
 `reset(options={"reset_mask": ...})`) with the last observation in `infos[i]["terminal_observation"]`
 and the new episode's reset info in `reset_infos[i]`, as SB3 defines it.
 
+Every action level works (`WrapperConfig(action_level="waypoints" | "meta")`): the batch's worlds
+take the level's plans as rows, like the single env.
+
 The native vector env runs no SUMO: pass `WrapperConfig(traffic="idm")` (or "none") for suites
 with SUMO scenarios; with `traffic=None` a SUMO scenario is refused with its name.
 """
@@ -79,7 +82,7 @@ class NativeSuiteVecEnv(VecEnv):
         self.action_codec = ActionCodec(self.wrapper)
         self.shaping: RewardConfig | None = self.wrapper.shaping if self.wrapper.reward == "shaped" else None
         self.render_mode = None  # read by VecEnv.__init__ through get_attr
-        super().__init__(n_envs, self.obs_codec.space, ActionCodec.space)
+        super().__init__(n_envs, self.obs_codec.space, self.action_codec.space)
         self.keys, _, _ = obs_space_info(self.observation_space)
         self._rngs: list[np.random.Generator | None] = [None] * n_envs
         self._cycles = [0] * n_envs

@@ -25,11 +25,13 @@ import numpy as np
 from gymnasium import spaces
 
 from drivehierarchy._core import ConfigError
-from drivehierarchy.envs.config import BevConfig, R4Config
-from drivehierarchy.envs.r4 import STATE_FIELDS, DriveHierarchyR4Env
+from drivehierarchy.envs.config import ACTION_LEVELS, ActionMode, BevConfig, R4Config
+from drivehierarchy.envs.r4 import PATH_ACTIONS, SPEED_ACTIONS, STATE_FIELDS, DriveHierarchyR4Env
 
 ObsKind = Literal["state", "bev", "state+bev"]
 ActionKind = Literal["decision", "raw"]
+ActionLevel = Literal["control", "waypoints", "meta"]
+_DEFAULT_ENV = R4Config()
 
 # The protocol's BEV covers 800 px / 8 px/m = 100 m; the small BEV keeps that field of view.
 PROTOCOL_BEV_SPAN_M = 100.0
@@ -67,10 +69,27 @@ class WrapperConfig:
     shaping: RewardConfig = field(default_factory=RewardConfig)
     # Background traffic of the training envs ("sumo", "idm", "none"; None = each scenario's).
     traffic: str | None = None
+    # The level the policy decides at (`--action-level`, docs/r4.md#action-levels): "control"
+    # (`action` above), "waypoints" (`waypoints` points `waypoint_dt_s` apart) or "meta" (a path
+    # action × a speed action). Models saved before the levels existed read as "control".
+    action_level: ActionLevel = "control"
+    waypoints: int = _DEFAULT_ENV.waypoints
+    waypoint_dt_s: float = _DEFAULT_ENV.waypoint_dt_s
 
     def __post_init__(self) -> None:
         if self.action not in ("decision", "raw"):
             raise ConfigError(f"config `action` = {self.action!r}: expected 'decision' or 'raw'")
+        if self.action_level not in ACTION_LEVELS:
+            raise ConfigError(
+                f"config `action_level` = {self.action_level!r}: expected one of {', '.join(ACTION_LEVELS)}"
+            )
+        if self.action_level != "control" and self.action != "decision":
+            raise ConfigError(
+                f"config `action` = {self.action!r}: a control mode, but `action_level` is "
+                f"{self.action_level!r} (raw control is the control level only)"
+            )
+        # R4Config checks the plan's shape with the env's own messages.
+        R4Config(waypoints=self.waypoints, waypoint_dt_s=self.waypoint_dt_s, front=None, bev=None)
         if self.obs not in ("state", "bev", "state+bev"):
             raise ConfigError(f"config `obs` = {self.obs!r}: expected 'state', 'bev' or 'state+bev'")
         if self.reward not in ("score", "shaped"):
@@ -87,6 +106,11 @@ class WrapperConfig:
     @property
     def uses_images(self) -> bool:
         return self.obs != "state"
+
+    @property
+    def env_action_mode(self) -> ActionMode:
+        """The env's `action_mode` this policy drives."""
+        return self.action if self.action_level == "control" else ACTION_LEVELS[self.action_level]
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -117,38 +141,95 @@ class WrapperConfig:
         if self.uses_images:
             bev = BevConfig(size_px=self.bev_size, px_per_m=self.bev_size / PROTOCOL_BEV_SPAN_M)
         traffic = self.traffic if self.traffic is not None else base.traffic
-        return base.replace(action_mode=self.action, front=None, bev=bev, prompt=False, traffic=traffic)
+        return base.replace(
+            action_mode=self.env_action_mode,
+            waypoints=self.waypoints,
+            waypoint_dt_s=self.waypoint_dt_s,
+            front=None,
+            bev=bev,
+            prompt=False,
+            traffic=traffic,
+        )
 
 
 # -- actions ------------------------------------------------------------------------------------
 class ActionCodec:
-    """Normalised [−1, 1]² ↔ the env's action.
+    """The policy's action ↔ the env's action, by level.
 
-    decision: a = [steer, speed] → [steer, (speed + 1)/2 · max_speed] (the protocol's bridge then
-    turns it into pedals); raw: a = [steer, accel] → [throttle = max(accel, 0),
+    control, decision: a ∈ [−1, 1]², [steer, speed] → [steer, (speed + 1)/2 · max_speed] (the
+    protocol's bridge then turns it into pedals); raw: [steer, accel] → [throttle = max(accel, 0),
     brake = max(−accel, 0), steer].
+    waypoints: a ∈ [−1, 1]^(K×2); point i (at t_i = (i + 1)·dt) is x = (a_x + 1)/2 · r_i forward and
+    y = a_y · r_i left, r_i = max_speed · t_i the farthest the car gets by then at max_speed (so
+    every action is a plan the car can drive, and a = 0 drives straight on at half max_speed, like
+    the control level).
+    meta: the env's `MultiDiscrete([6, 4])` as it is (path action, speed action).
     """
-
-    space = spaces.Box(-1.0, 1.0, (2,), np.float32)
 
     def __init__(self, config: WrapperConfig) -> None:
         self.kind = config.action
+        self.level = config.action_level
         self.max_speed = float(config.max_speed_mps)
+        self.space: spaces.Space[Any]
+        if self.level == "meta":
+            self.space = spaces.MultiDiscrete([len(PATH_ACTIONS), len(SPEED_ACTIONS)])
+        elif self.level == "waypoints":
+            k = int(config.waypoints)
+            self.space = spaces.Box(-1.0, 1.0, (k, 2), np.float32)
+            reach = self.max_speed * float(config.waypoint_dt_s) * np.arange(1, k + 1, dtype=np.float32)
+            self.reach = reach.reshape(k, 1).astype(np.float32)
+        else:
+            self.space = spaces.Box(-1.0, 1.0, (2,), np.float32)
 
     def decode(self, a: np.ndarray) -> np.ndarray:
+        if self.level == "meta":
+            # Out-of-range indices (a stray sample) are clipped into the space, as Box actions are.
+            idx = np.asarray(a).reshape(2).astype(np.int64)
+            return np.clip(idx, 0, np.asarray(self.space.nvec) - 1)  # type: ignore[attr-defined]
+        if self.level == "waypoints":
+            w = np.clip(np.asarray(a, dtype=np.float32).reshape(self.reach.shape[0], 2), -1.0, 1.0)
+            x = (w[:, :1] + 1.0) * 0.5 * self.reach
+            return np.concatenate([x, w[:, 1:] * self.reach], axis=1).astype(np.float32)
         a = np.clip(np.asarray(a, dtype=np.float32).reshape(2), -1.0, 1.0)
         if self.kind == "decision":
             return np.array([a[0], (a[1] + 1.0) * 0.5 * self.max_speed], np.float32)
         return np.array([max(a[1], 0.0), max(-a[1], 0.0), a[0]], np.float32)
 
     def encode(self, env_action: np.ndarray) -> np.ndarray:
-        """The normalised action that decodes to (the clipped) `env_action` (for imitation labels)."""
+        """The policy action that decodes to (the clipped) `env_action` (for imitation labels)."""
+        if self.level == "meta":
+            return self.decode(env_action)
         e = np.asarray(env_action, dtype=np.float32)
-        if self.kind == "decision":
+        if self.level == "waypoints":
+            w = e.reshape(self.reach.shape[0], 2) / self.reach
+            out = np.concatenate([2.0 * w[:, :1] - 1.0, w[:, 1:]], axis=1)
+        elif self.kind == "decision":
             out = np.array([e[0], 2.0 * e[1] / self.max_speed - 1.0], np.float32)
         else:
             out = np.array([e[2], e[0] - e[1]], np.float32)
-        return np.clip(out, -1.0, 1.0)
+        return np.clip(out, -1.0, 1.0).astype(np.float32)
+
+    def perturb(self, env_action: np.ndarray, rng: np.random.Generator, noise: float) -> np.ndarray:
+        """DART-style noise of strength `noise` on an env action (what the collector executes;
+        labels stay clean), of the same size at every level: control σ·[0.1 steer, 2 m/s speed];
+        waypoints a lateral drift growing to σ·1 m at the plan's end and the speed scaled by
+        (1 + σ·0.15·N); meta a uniformly random action with probability min(0.1·σ, 1)."""
+        if self.level == "meta":
+            if rng.random() < min(0.1 * noise, 1.0):
+                return rng.integers(0, np.asarray(self.space.nvec)).astype(np.int64)  # type: ignore[attr-defined]
+            return np.asarray(env_action, np.int64)
+        if self.level == "waypoints":
+            plan = np.array(env_action, dtype=np.float32).reshape(self.reach.shape[0], 2)
+            k = plan.shape[0]
+            drift, scale = rng.normal(0.0, noise), 1.0 + 0.15 * rng.normal(0.0, noise)
+            plan[:, 0] *= max(scale, 0.0)
+            plan[:, 1] += drift * np.arange(1, k + 1, dtype=np.float32) / k
+            return self.decode(self.encode(plan))  # into the policy's range
+        a = np.asarray(env_action, np.float32)
+        if self.kind != "decision":
+            raise ConfigError("config `action` = 'raw': demonstrations are decisions, not raw control")
+        a = a + rng.normal(0.0, noise, 2).astype(np.float32) * np.array([0.1, 2.0], np.float32)
+        return np.clip(a, [-1.0, 0.0], [1.0, 30.0]).astype(np.float32)
 
 
 # -- observations ---------------------------------------------------------------------------------
@@ -355,12 +436,13 @@ class SuiteEnv(gym.Env[dict[str, Any], np.ndarray]):
 
 # -- wrappers -----------------------------------------------------------------------------------
 class NormalizedActions(gym.ActionWrapper[Any, np.ndarray, np.ndarray]):
-    """Actions in [−1, 1]² (see `ActionCodec`)."""
+    """The policy's action space of the level: [−1, 1]², [−1, 1]^(K×2) or the meta
+    `MultiDiscrete` (see `ActionCodec`)."""
 
     def __init__(self, env: gym.Env[Any, Any], config: WrapperConfig) -> None:
         super().__init__(env)
         self.codec = ActionCodec(config)
-        self.action_space = ActionCodec.space
+        self.action_space = self.codec.space
 
     def action(self, action: np.ndarray) -> np.ndarray:
         return self.codec.decode(action)

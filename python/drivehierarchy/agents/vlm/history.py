@@ -17,6 +17,12 @@ The text parts are always present once enabled (saying `none yet` at the start).
 Frames are kept as the data URLs sent when they were current, so history never re-encodes an
 image. The state is one episode's: a resumed run redoes an unfinished episode from its start and
 rebuilds the same history.
+
+Cost: a decision's bookkeeping is one small record appended to a bounded deque (the ego's x, y and
+formatted speed; the reply's memory line, formatted once when it arrives). The texts are built
+only inside `messages()`, i.e. for a request that is sent, from the records and from offset
+labels formatted once per episode (scripts/bench_vlm_history.py and
+scripts/bench_action_levels.py measure what it adds to a decision).
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ import math
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -41,6 +48,8 @@ from drivehierarchy.agents.vlm.payload import (
 
 Content = list[dict[str, Any]]
 CURRENT_LABEL = "t-0.00 s, the current frame"
+EGO_HEAD = "Ego history, oldest first, positions in the current ego frame as (forward_m, right_m)"
+MEMORY_HEAD = "Your previous decisions, oldest first"
 
 
 @dataclass(frozen=True)
@@ -110,6 +119,11 @@ class _Past:
     speed: str = ""  # "8.1 m/s", formatted once
 
 
+@lru_cache(maxsize=64)
+def _ego_template(count: int) -> str:
+    return EGO_HEAD + ": " + "; ".join(["{}: ({:.1f}, {:.1f}) at {}"] * count) + "."
+
+
 def offset_label(ticks: int, tick_s: float) -> str:
     return f"t-{ticks * tick_s:.2f} s"
 
@@ -145,7 +159,8 @@ class DecisionHistory:
     tick_s: float
     seed: int = 0
     _frames: deque[_Past] = field(init=False)
-    _replies: deque[tuple[int, int, str]] = field(init=False)  # (decision, asked tick, what happened)
+    # (asked tick, " (frame d): what happened"): the memory line but its offset label, made once.
+    _replies: deque[tuple[int, str]] = field(init=False)
     _asked: dict[int, int] = field(init=False, default_factory=dict)
     # The time offsets (s) of the past frames the last message carried, oldest first (for the log).
     last_offsets_s: list[float] = field(init=False, default_factory=list)
@@ -162,6 +177,7 @@ class DecisionHistory:
         self._asked = {}
         self._labels: dict[int, str] = {}
         self._descriptors: dict[tuple[str, int, int, str], str] = {}
+        self._images = bool(self.payload.images)
 
     def _slots(self, count: int) -> list[_Past]:
         """The past entries of decisions n − stride·k, k = count..1 (oldest first), those that exist.
@@ -196,21 +212,12 @@ class DecisionHistory:
             raise ConfigError("config `prompt` = False: the VLM agent needs the env's prompt observation")
         if o.ego and ego is None:
             raise ConfigError(f"--ego-history = {o.ego}: the ego state of decision {decision} is missing")
-        current = encode_images(obs, decision, self.payload, seed=self.seed)
-        frame_slots = self._slots(o.frames)
-        self.last_offsets_s = [round((tick - p.tick) * self.tick_s, 4) for p in frame_slots]
+        current = encode_images(obs, decision, self.payload, seed=self.seed) if self._images else []
         content: Content = []
-        sources = list(frame_slots)
-        if o.shuffle and len(sources) > 1:
-            sources = [sources[i] for i in self._permutation(decision, len(sources))]
-        keys = ("front", "bev") if o.bev else ("front",)
-        for slot, src in zip(frame_slots, sources, strict=True):
-            when = self._label(tick - slot.tick)
-            images = current if o.freeze else src.images
-            for key, w, h, url in images:
-                if key in keys:
-                    content.append({"type": "text", "text": self._descriptor(key, w, h, when)})
-                    content.append({"type": "image_url", "image_url": {"url": url}})
+        if o.frames:
+            self._add_past_frames(content, current, decision, tick)
+        else:
+            self.last_offsets_s = []
         for key, w, h, url in current:
             if o.frames:
                 text = self._descriptor(key, w, h, CURRENT_LABEL)
@@ -227,8 +234,27 @@ class DecisionHistory:
         if ego is not None and o.ego:
             past.x, past.y, past.speed = float(ego[0]), float(ego[1]), f"{ego[3]:.1f} m/s"
         self._frames.append(past)
-        self._asked[decision] = tick
+        if o.memory:
+            self._asked[decision] = tick
         return [{"role": "user", "content": content}]
+
+    def _add_past_frames(
+        self, content: Content, current: list[tuple[str, int, int, str]], decision: int, tick: int
+    ) -> None:
+        o = self.options
+        frame_slots = self._slots(o.frames)
+        self.last_offsets_s = [round((tick - p.tick) * self.tick_s, 4) for p in frame_slots]
+        sources = list(frame_slots)
+        if o.shuffle and len(sources) > 1:
+            sources = [sources[i] for i in self._permutation(decision, len(sources))]
+        keys = ("front", "bev") if o.bev else ("front",)
+        for slot, src in zip(frame_slots, sources, strict=True):
+            when = self._label(tick - slot.tick)
+            images = current if o.freeze else src.images
+            for key, w, h, url in images:
+                if key in keys:
+                    content.append({"type": "text", "text": self._descriptor(key, w, h, when)})
+                    content.append({"type": "image_url", "image_url": {"url": url}})
 
     def record_reply(self, decision: int, reply: dict[str, Any] | None) -> None:
         """The env's `info["reply"]` of the step that applied decision `decision` (memory)."""
@@ -237,7 +263,7 @@ class DecisionHistory:
         tick = self._asked.pop(decision, None)
         if tick is None:
             return
-        self._replies.append((decision, tick, _reply_text(reply or {})))
+        self._replies.append((tick, f" (frame {decision}): {_reply_text(reply or {})}"))
 
     def _permutation(self, decision: int, n: int) -> list[int]:
         """A permutation of the n past slots that is never the identity, from seed and decision."""
@@ -248,25 +274,25 @@ class DecisionHistory:
         return perm
 
     def _ego_text(self, slots: list[_Past], tick: int, ego: Sequence[float] | None) -> str:
-        head = "Ego history, oldest first, positions in the current ego frame as (forward_m, right_m)"
         if not slots or ego is None:
-            return f"{head}: none yet (the episode has just started)."
+            return f"{EGO_HEAD}: none yet (the episode has just started)."
         x0, y0, yaw0 = float(ego[0]), float(ego[1]), float(ego[2])
         c, s = math.cos(yaw0), math.sin(yaw0)
-        label = self._label
-        # forward is (cos, sin), left (−sin, cos), so right = dx·sin − dy·cos
-        items = [
-            f"{label(tick - p.tick)}: ({(p.x - x0) * c + (p.y - y0) * s:.1f}, "
-            f"{(p.x - x0) * s - (p.y - y0) * c:.1f}) at {p.speed}"
-            for p in slots
-        ]
-        text = f"{head}: " + "; ".join(items) + "."
+        labels, label = self._labels, self._label
+        # forward is (cos, sin), left (−sin, cos), so right = dx·sin − dy·cos. One format call for
+        # all the items (a template per count) costs less than formatting and joining each.
+        args: list[Any] = []
+        for p in slots:
+            dx, dy = p.x - x0, p.y - y0
+            ago = tick - p.tick
+            args += (labels.get(ago) or label(ago), dx * c + dy * s, dx * s - dy * c, p.speed)
+        text = _ego_template(len(slots)).format(*args)
         return text.replace("(-0.0,", "(0.0,").replace(" -0.0)", " 0.0)")
 
     def _memory_text(self, tick: int) -> str:
-        head = "Your previous decisions, oldest first"
-        if not self._replies:
-            return f"{head}: none yet (this is the first decision)."
-        label = self._label
-        items = [f"{label(tick - asked)} (frame {d}): {what}" for d, asked, what in self._replies]
-        return f"{head}: " + "; ".join(items) + "."
+        replies = self._replies
+        if not replies:
+            return f"{MEMORY_HEAD}: none yet (this is the first decision)."
+        labels, label = self._labels, self._label
+        items = [(labels.get(tick - asked) or label(tick - asked)) + what for asked, what in replies]
+        return MEMORY_HEAD + ": " + "; ".join(items) + "."

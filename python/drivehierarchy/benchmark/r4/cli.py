@@ -30,11 +30,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         p.add_argument(
             "--action-level",
             choices=["control", "waypoints", "meta"],
-            default="control",
+            default=None,
             help="what the agent decides: control = the paper's [steer, target speed] (default); "
             "waypoints = 8 ego-frame points 0.5 s apart for the waypoint tracker; meta = a path "
             "action x a speed action. waypoints and meta are this project's extension of the "
-            "protocol (docs/r4.md#action-levels)",
+            "protocol (docs/r4.md#action-levels). An sb3: model drives at the level it was "
+            "trained at (default), and another level is refused",
         )
         p.add_argument("--frames", action="store_true", help="save front and BEV PNGs of every decision")
         p.add_argument("--video", action="store_true", help="save an animated GIF of the front camera")
@@ -198,9 +199,18 @@ def _vlm_options(args: argparse.Namespace) -> object | None:
 def _opts(args: argparse.Namespace) -> runner.RunOptions:
     from drivehierarchy.envs.config import R4Config
 
+    level, mode = args.action_level or "control", None
+    if args.agent.startswith("sb3:"):
+        from drivehierarchy.agents.sb3 import model_level
+
+        # The model's level (a raw-control model: the control level in action mode raw).
+        level, mode = model_level(args.agent.removeprefix("sb3:"), args.action_level)
+    config = R4Config(conditions=args.conditions, camera_fault=args.camera_fault)
+    if mode is not None:
+        config = config.replace(action_mode=mode)
     return runner.RunOptions(
         agent=args.agent,
-        config=R4Config(conditions=args.conditions, camera_fault=args.camera_fault),
+        config=config,
         seed=args.seed,
         frames=args.frames,
         video=args.video,
@@ -211,7 +221,7 @@ def _opts(args: argparse.Namespace) -> runner.RunOptions:
         progress=args.progress or sys.stderr.isatty(),
         worker_timeout_s=_worker_timeout(getattr(args, "worker_timeout", 600.0)),
         force=args.force,
-        action_level=args.action_level,
+        action_level=level,
     )
 
 

@@ -156,6 +156,16 @@ async def evaluate_async(
             f"config `agent` = {opts.agent!r}: decides at the control level only; --action-level "
             f"{opts.action_level} takes expert, vlm or an sb3: policy trained at that level"
         )
+    if opts.agent.startswith("sb3:"):
+        from drivehierarchy.agents.sb3 import model_level
+
+        # A policy drives at the level it was trained at: refused here, before anything is written.
+        _, mode = model_level(opts.agent.removeprefix("sb3:"), opts.action_level)
+        if opts.config.action_mode != mode:
+            raise ConfigError(
+                f"config `action_mode` = {opts.config.action_mode!r}: the model {opts.agent} "
+                f"drives in action mode {mode!r}"
+            )
     jobs = jobs_for(scenarios, opts.seed_list())
     # Every scenario is loaded (a bad file fails here, before anything is written) and its traffic
     # resolved as the env will run it.
