@@ -88,3 +88,16 @@ def test_quick_lane_skips_only_tests_that_exist() -> None:
         if kind == "deselect":
             source = (ROOT / path).read_text(encoding="utf-8")
             assert re.search(rf"^def {re.escape(name)}\(", source, re.M), f"QUICK_SKIP: no test {target}"
+
+
+def test_heavy_first_names_only_test_files_that_exist() -> None:
+    """The gate's scheduling order (tests/conftest.py `HEAVY_FIRST`) names real test files: a
+    renamed file would silently fall back to collection order."""
+    sys.path.insert(0, str(ROOT / "tests"))
+    try:
+        from conftest import HEAVY_FIRST
+    finally:
+        sys.path.remove(str(ROOT / "tests"))
+    assert len(set(HEAVY_FIRST)) == len(HEAVY_FIRST)
+    missing = [name for name in HEAVY_FIRST if not (ROOT / name).is_file()]
+    assert not missing, f"HEAVY_FIRST names no test file: {missing}"
