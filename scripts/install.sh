@@ -101,7 +101,12 @@ for extra in filter(None, (e.strip() for e in sys.argv[1].split(","))):
     add(extra)
 print("\n".join(out))
 PY
-.venv/bin/uv pip install --quiet --python "$VPY" -r "$reqs" &
+# DH_DEPS_DONE (scripts/test.sh): a file touched once the dependencies are in, so that checks
+# needing no build (ruff, mypy) can start while the Rust core still builds.
+(
+    .venv/bin/uv pip install --quiet --python "$VPY" -r "$reqs"
+    if [ -n "${DH_DEPS_DONE:-}" ]; then touch "$DH_DEPS_DONE"; fi
+) &
 deps_pid=$!
 build_rc=0
 env -u SUMO_HOME "$VPY" -m pip install --quiet --no-deps -e . || build_rc=$?

@@ -14,11 +14,12 @@
 # Extra arguments go to pytest (`bash scripts/test.sh --quick -k scoring`).
 #
 # The full gate runs three lanes on the two cores. The Python lane installs (building the Rust
-# core with maturin while uv installs the dependencies), then runs pytest (two workers). The
-# checks lane starts when the install is done and runs ruff, stubtest and the docs build beside
-# pytest (they are short and would otherwise sit on the critical path). The Rust lane formats,
-# builds and runs the fuzz targets (5 s each), waits for the install's build, then runs clippy +
-# the Rust tests on that same build and the wheel check. Each step prints when it starts; the
+# core with maturin while uv installs the dependencies), then runs pytest (two workers), the
+# heaviest test files first (tests/conftest.py). The checks lane starts when the install is done
+# and runs stubtest and the docs build beside pytest (they are short and would otherwise sit on
+# the critical path). The Rust lane formats, builds and runs the fuzz targets (3 s each), runs
+# ruff and mypy once the dependencies are installed (they need no build), waits for the
+# install's build, then runs clippy + the Rust tests on that same build and the wheel check. Each step prints when it starts; the
 # background lanes' output is printed when they end, and the script fails if any lane failed.
 #
 # One release build serves the extension, clippy, the Rust tests and the wheel: the install, the
@@ -117,6 +118,7 @@ fi
 rust_log="$(mktemp)"
 checks_log="$(mktemp)"
 built="$(mktemp -u)"  # exists once the install has built the extension
+deps="$(mktemp -u)"   # exists once the install has installed the dependencies (DH_DEPS_DONE)
 rust_lane() {
     set -euo pipefail
     step "rust: cargo fmt"; cargo fmt --all -- --check
@@ -124,10 +126,17 @@ rust_lane() {
     # downloads leave idle. (Measured alternatives, all slower: at nice 10 the fuzz build starved
     # behind pytest; after the Rust tests it slowed pytest more than it slows the install.)
     # CARGO_INCREMENTAL=0: a fresh clone builds the fuzz crate once, so incremental caches
-    # (the dev profile's default) are work nobody reads. Line tables only, not full debuginfo: a
-    # crash's backtrace keeps its file:line, and the build takes ~9 % less CPU (160 -> 146 CPU-s
-    # measured with none at all).
-    step "rust: fuzz"; CARGO_INCREMENTAL=0 CARGO_PROFILE_DEV_DEBUG=line-tables-only FUZZ_DEV=1 bash scripts/fuzz.sh 5
+    # (the dev profile's default) are work nobody reads. Debug info: fuzz/Cargo.toml's dev
+    # profile (line tables for our crates, none for dependencies).
+    step "rust: fuzz"; CARGO_INCREMENTAL=0 FUZZ_DEV=1 bash scripts/fuzz.sh 3
+    # Ruff and mypy need no build, only the dependencies (installed long before the fuzz run
+    # ends): they run here, in the install's serial tail (the extension crate builds on one core
+    # while this lane would wait), instead of beside pytest when both cores are busy.
+    step "rust: waiting for the install's dependencies"
+    until [ -e "$deps" ]; do sleep 1; done
+    step "rust: ruff";  $PY -m ruff check .
+                        $PY -m ruff format --check .
+    step "rust: mypy";  $PY -m mypy  # [tool.mypy] in pyproject.toml: strict on envs, agents, benchmark
     step "rust: waiting for the install's build"
     until [ -e "$built" ]; do sleep 1; done
     step "rust: clippy + cargo test (the install's build)"
@@ -138,16 +147,13 @@ rust_lane() {
     step "rust: wheel"; env "${BUILD[@]}" bash scripts/wheel_check.sh
     step "rust: done"
 }
-# Ruff, the stub contract and the docs site: short, and independent of pytest, so they run beside
-# it instead of before it. The docs build is strict and not --quiet: --quiet raises the log level
+# The stub contract and the docs site need the built extension: short, and independent of
+# pytest, so they run beside it instead of before it. The docs build is strict and not --quiet: --quiet raises the log level
 # above WARNING, so strict mode would never count a warning (tests/docs/test_docs_build.py holds
 # the gate to it). A clean build prints three lines.
 checks_lane() {
     set -euo pipefail
-    step "checks: ruff";     $PY -m ruff check .
-                             $PY -m ruff format --check .
     step "checks: stubtest"; $PY -m mypy.stubtest drivehierarchy._core --allowlist python/stubtest-allowlist.txt
-    step "checks: mypy";     $PY -m mypy  # [tool.mypy] in pyproject.toml: strict on envs, agents, benchmark
     step "checks: docs";     DISABLE_MKDOCS_2_WARNING=true NO_MKDOCS_2_WARNING=1 $PY -m mkdocs build --strict --site-dir "$(mktemp -d)"
     step "checks: done"
 }
@@ -161,11 +167,11 @@ cleanup() {
         pkill -P "$pid" 2>/dev/null || true
         kill "$pid" 2>/dev/null || true
     done
-    rm -f "$built"
+    rm -f "$built" "$deps"
 }
 trap cleanup EXIT
 
-env "${BUILD[@]}" bash scripts/install.sh all
+env "${BUILD[@]}" DH_DEPS_DONE="$deps" bash scripts/install.sh all
 touch "$built"
 export PATH="$PWD/.venv/bin:$PATH"
 checks_lane >"$checks_log" 2>&1 &
@@ -180,10 +186,10 @@ wait "$checks_pid" || checks_rc=$?
 rust_rc=0
 wait "$rust_pid" || rust_rc=$?
 trap - EXIT
-rm -f "$built"
-echo "---- checks lane (ruff, stubtest, docs) ----"
+rm -f "$built" "$deps"
+echo "---- checks lane (stubtest, docs) ----"
 cat "$checks_log"
-echo "---- Rust lane (fmt, fuzz, clippy, cargo test, wheel) ----"
+echo "---- Rust lane (fmt, fuzz, ruff, mypy, clippy, cargo test, wheel) ----"
 cat "$rust_log"
 rm -f "$rust_log" "$checks_log"
 if [ "$checks_rc" != 0 ]; then
