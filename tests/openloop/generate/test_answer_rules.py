@@ -42,8 +42,22 @@ def test_speed_action_uses_the_frames_shown_only() -> None:
     assert r1.ego_speed_action([8.0 - 0.5 * k for k in range(9)]) == "slowing"
     assert r1.ego_speed_action([2.0 + 0.5 * k for k in range(9)]) == "speeding"
     assert r1.ego_speed_action([0.0] * 9) == "stopped"
-    # Slowed down, then speeding up again in the last second: neither class.
-    assert r1.ego_speed_action([8, 7, 6, 5, 4, 4.2, 4.4, 4.6, 4.8]) is None
+    # Slowed down, then speeding up again in the last second: neither class, no speed named.
+    assert r1.ego_speed_action([8, 7, 6, 5, 4, 4.2, 4.4, 4.6, 4.8]) == "moving"
+    # Creeping (below the driving speed) without standing: no clear class at all.
+    assert r1.ego_speed_action([1.0, 1.2, 1.0, 1.1, 1.0, 1.2, 1.1, 1.0, 1.1]) is None
+
+
+def test_speed_words_only_for_a_change_a_person_sees() -> None:
+    # Audit: 5.4 → 6.4 m/s over the 2 s shown was called "speeding up"; nobody sees +1 m/s.
+    assert r1.ego_speed_action([5.4 + 0.125 * k for k in range(9)]) == "moving"
+    # +2.5 m/s from 9 m/s (28 % of the slower end): the ground visibly moves faster.
+    assert r1.ego_speed_action([9.0 + 2.5 * k / 8 for k in range(9)]) == "speeding"
+    # 2 m/s at 18–20 m/s is only 11 %: not named; 2.5 m/s at 10 m/s is.
+    assert r1.ego_speed_action([20.0 - 0.25 * k for k in range(9)]) == "moving"
+    assert r1.ego_speed_action([12.6 - 2.6 * k / 8 for k in range(9)]) == "slowing"
+    # 1.5 m/s at 3–4.5 m/s is 50 % but below the 2 m/s floor.
+    assert r1.ego_speed_action([3.0 + 1.5 * k / 8 for k in range(9)]) == "moving"
 
 
 # -- colour words ---------------------------------------------------------------------------------
