@@ -761,7 +761,7 @@ def situation(m: Moment, frames: list[Frame]) -> Situation | None:
                 "lead",
                 f"{verb} because the {noun} ahead of me is {state}.",
                 f"The {noun} ahead of me is {state}, so {verb}.",
-                f"{verb} behind the {state} {noun} ahead of me.",
+                f"{verb} behind the {noun} ahead of me, which is {state}.",
             )
         if speed == "slowing" and turn != "straight" and not near:
             return out(
