@@ -370,13 +370,15 @@ def test_a_counted_vehicle_shows_more_than_a_sliver() -> None:
         v = Visible(car, box, (0, 0), 60.0, 0.5, 700, 350, "", seen)
         return Frame("CAM_FRONT", 0, 0.0, (1600, 900), b"", [v])
 
-    # Audit #67: a 22 × 9 px roof above a nearer car, of a 30 × 24 px silhouette.
-    roof = shown((100, 100, 129, 123), (104, 100, 125, 108))
+    # Audit #67: the car's top 10 of 18 rows (roof and windows, 24 × 10 px) above a nearer car,
+    # 57 % of its pixels: a sliver to a reader.
+    roof = shown((823, 451, 847, 468), (823, 451, 846, 460))
     assert not roof.visible[0].recognisable and r2.sliver_only([roof], {1})
-    # 20 × 15 px of it, or half its height: recognisable.
+    # 20 × 15 px of it, or two thirds of its height: recognisable.
     assert shown((100, 100, 129, 123), (100, 100, 119, 114)).visible[0].recognisable
-    small = shown((100, 100, 111, 108), (100, 100, 111, 104))  # a far 12 × 9 px car, 5 px shown
+    small = shown((100, 100, 111, 108), (100, 100, 111, 108))  # a far 12 × 9 px car, shown whole
     assert small.visible[0].recognisable
+    assert not shown((100, 100, 111, 108), (100, 100, 111, 104)).visible[0].recognisable  # its top
     assert not r2.sliver_only([roof, shown((100, 100, 129, 123), (100, 100, 129, 123))], {1})
 
 

@@ -123,7 +123,7 @@ def vehicle_outcome(v0: float, yaw0: float, x0: float, y0: float, future: Sequen
 
 # A turn or lane change is asked only when the frame shows it coming: the vehicle's indicator on
 # that side is lit, or (turns) its heading has already swung by CUE_YAW_DEG over the last
-# CUE_PAST_S toward that side after a second of driving straight (within STRAIGHT_BEFORE_DEG),
+# CUE_PAST_S toward that side after STRAIGHT_BEFORE_S of driving straight (within STRAIGHT_BEFORE_DEG),
 # so it stands visibly askew to the lane it came along. On a curve or in a roundabout a vehicle
 # following its lane swings as much without standing askew to anything: there (and whenever the
 # heading before is unknown) only the indicator counts. Without a cue, "keep going straight" fits
@@ -134,7 +134,8 @@ def vehicle_outcome(v0: float, yaw0: float, x0: float, y0: float, future: Sequen
 # brake lamps lit and seen; "Decelerate gradually without braking" has no cue in a still frame
 # (dark lamps look the same at a steady speed) and is not asked.
 CUE_YAW_DEG = 15.0
-CUE_PAST_S = 1.0
+CUE_PAST_S = 2.0
+STRAIGHT_BEFORE_S = 1.0
 STRAIGHT_BEFORE_DEG = 3.0
 STANDING_MPS = 0.05
 _LEFT_SIDE = {TURN_LEFT: True, LANE_LEFT: True, TURN_RIGHT: False, LANE_RIGHT: False}
@@ -151,7 +152,7 @@ def frame_cue(
     lamps_seen: bool = False,
 ) -> bool:
     """Whether the frame that shows vehicle `a` (an `ActorState`) gives a cue for `outcome`.
-    `past_yaw` is its heading CUE_PAST_S before the frame and `before_yaw` another CUE_PAST_S
+    `past_yaw` is its heading CUE_PAST_S before the frame and `before_yaw` STRAIGHT_BEFORE_S
     earlier (None when unknown); `curved`: it drives on a curve or in a roundabout;
     `lamps_seen`: its rear (brake lamps) shows clearly in the frame."""
     lit_left, lit_right = bool(a.blinkers & BLINKER_LEFT), bool(a.blinkers & BLINKER_RIGHT)
@@ -243,7 +244,7 @@ def build_r3_1(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
                     a,
                     _past_yaw(m, a.id),
                     m.ego.yaw,
-                    before_yaw=_past_yaw(m, a.id, 2 * CUE_PAST_S),
+                    before_yaw=_past_yaw(m, a.id, CUE_PAST_S + STRAIGHT_BEFORE_S),
                     curved=any(c in m.category for c in CURVED_CATEGORIES),
                     lamps_seen=seen,
                 )
