@@ -69,8 +69,9 @@ def _frames(rec: dict[str, Any]) -> dict[str, Any]:
 
 def test_every_task_yields_records(records) -> None:
     for task in TASKS:
-        # R2_2_B asks only about objects within 40 m, balanced within each class: fewer.
-        least = 2 if task == "R2_2_B" else 4
+        # R2_2_B asks only about objects within 40 m, balanced within each class, and R3_1 only
+        # where the frame gives a cue (lamps seen, a standstill, an indicator): fewer.
+        least = 2 if task in ("R2_2_B", "R3_1") else 4
         assert len(records[task]) >= least, f"{task}: only {len(records[task])} records from the rollouts"
 
 
