@@ -399,7 +399,7 @@ def r1_2_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
 
 @register("R1_2_C", needs=Needs())
 def r1_2_c(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str, Any]]:
-    by_count: dict[int, list[Any]] = {}
+    by_count: dict[tuple[str, str, int], list[Any]] = {}
     for m, f in _front_frames(moments):
         for cat in CATEGORIES:
             if not _clear(f, cat):
@@ -431,8 +431,11 @@ def r1_2_c(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
                         "original_subtask_id": "L1-2-C",
                     }
                 )
-                by_count.setdefault(len(inside), []).append((rec, [f]))
+                by_count.setdefault((cat, name, len(inside)), []).append((rec, [f]))
     quality.passed(sum(len(v) for v in by_count.values()))
+    # Round-robin over (class, bucket, count): the class and bucket are in the question, and
+    # balanced over counts alone a text-only rule guessing one count per class and bucket
+    # (no cones far away) scored 52.7 against chance 33.0 on seed 2027.
     chosen = quality.balance_counts(by_count, n, rng)
     return _finish([c[0] for c in chosen], "R1_2_C", [c[1] for c in chosen])
 
@@ -583,7 +586,7 @@ R1_4_FRAMES = 5
 R1_4_STRIDE = 2  # 2 Hz: the five frames span the 2 s up to the moment
 # The original's wordings that ask for the ego's own action in general (its others name a van,
 # the rain or a sign), and two that also ask for the reason the answer gives. One situation is
-# asked at most once per wording (no repeated question+answer).
+# asked at most once per (question, answer wording) pair (no repeated question+answer).
 R1_4_QUESTIONS = (
     "What action are you currently taking as the driver?",
     "What are you doing right now and why?",
@@ -818,8 +821,9 @@ def situation_answer(m: Moment, frames: list[Frame]) -> str | None:
     return sit.wordings[0] if sit else None
 
 
-# History frames at every regular anchor of the purposeful drivers: about one moment in twelve
-# gives a clear-cut situation not yet asked in that wording.
+# History frames at every regular anchor of the purposeful drivers: about one moment in six
+# gives a clear-cut situation not yet asked in that (question, wording) pair (440–480 of the
+# ~2,800 on seeds 761971 and 12345, for 200 records).
 @register(
     "R1_4",
     needs=Needs(history=R1_4_FRAMES, history_stride=R1_4_STRIDE, oversample=20.0, drivers=R1_4_DRIVERS),
