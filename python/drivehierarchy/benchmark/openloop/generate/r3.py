@@ -231,7 +231,7 @@ def build_r3_1(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
                     dropped("a pedestrian cut off or half hidden")
                     continue  # walking or standing cannot be told from a cut-off figure
                 outcome = pedestrian_outcome(a.speed_mps, a.yaw, future)
-                pool = PEDESTRIAN_DISTRACTORS.get(outcome or "", ())
+                pool = list(PEDESTRIAN_DISTRACTORS.get(outcome or "", ()))
             else:
                 if target.visible_fraction < TARGET_WHOLE:
                     dropped("a vehicle cut off or partly hidden")
