@@ -285,7 +285,7 @@ impl PySim {
     }
 
     /// Actors visible to a camera: id, bbox_px, center_px, distance_m, visible_fraction, pixel_count,
-    /// colour_name, visible_rgb.
+    /// visible_bbox_px, colour_name, visible_rgb.
     fn project_actors<'py>(
         &self,
         py: Python<'py>,
@@ -491,6 +491,7 @@ fn projected_to_py<'py>(
         d.set_item("distance_m", a.distance_m)?;
         d.set_item("visible_fraction", a.visible_fraction)?;
         d.set_item("pixel_count", a.pixel_count)?;
+        d.set_item("visible_bbox_px", a.visible_bbox_px.to_vec())?;
         d.set_item("colour_name", a.colour_name)?;
         d.set_item("visible_rgb", a.visible_rgb.map(u32::from).to_vec())?;
         out.append(d)?;

@@ -161,6 +161,10 @@ pub struct ProjectedActor {
     /// Silhouette pixels, those cut off by the image border included (the in-image count
     /// scaled by the projected area's in-image share).
     pub pixel_count: u32,
+    /// Pixel box [x_min, y_min, x_max, y_max] of the unoccluded pixels only (max exclusive;
+    /// all zero when none is unoccluded): what a viewer can see of the actor, e.g. a roof
+    /// sliver above a nearer car is wide but only a few pixels high.
+    pub visible_bbox_px: [f32; 4],
     /// The colour name a viewer gives the actor from the visible pixels of its body paint
     /// (vehicle panels, a person's top, a bicycle's frame) in this image
     /// ([`super::palette::name_pixels`]); `None` when no paint is visible.
@@ -644,6 +648,7 @@ impl Renderer {
             }
             let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
             let mut visible = 0usize;
+            let (mut vx0, mut vy0, mut vx1, mut vy1) = (usize::MAX, usize::MAX, 0, 0);
             let mut px = std::mem::take(&mut self.px);
             px.clear();
             for y in 0..h {
@@ -660,6 +665,10 @@ impl Renderer {
                         let id = ids[y * w + x];
                         if id & !PAINT_BIT == stamp {
                             visible += 1;
+                            vx0 = vx0.min(x);
+                            vx1 = vx1.max(x + 1);
+                            vy0 = vy0.min(y);
+                            vy1 = vy1.max(y + 1);
                             if id & PAINT_BIT != 0 {
                                 let o = (y * w + x) * 3;
                                 px.push([self.ss[o], self.ss[o + 1], self.ss[o + 2]]);
@@ -710,6 +719,11 @@ impl Renderer {
                 distance_m: a.pose.pos.dist(frame.ego.pose.pos),
                 visible_fraction: visible as f32 / whole as f32,
                 pixel_count: whole as u32,
+                visible_bbox_px: if visible > 0 {
+                    [vx0 as f32, vy0 as f32, vx1 as f32, vy1 as f32]
+                } else {
+                    [0.0; 4]
+                },
                 colour_name: super::palette::name_pixels(&px),
                 visible_rgb,
             });

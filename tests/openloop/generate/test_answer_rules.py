@@ -18,7 +18,17 @@ import pytest
 
 from drivehierarchy import _core
 from drivehierarchy.benchmark.openloop.generate import quality, r1
-from drivehierarchy.benchmark.openloop.generate.rollout import colour_name, shown_colour
+from drivehierarchy.benchmark.openloop.generate.rollout import (
+    ActorState,
+    EgoState,
+    Frame,
+    Moment,
+    Rollout,
+    RouteLight,
+    Visible,
+    colour_name,
+    shown_colour,
+)
 
 REPO = Path(__file__).resolve().parents[3]
 
@@ -42,8 +52,22 @@ def test_speed_action_uses_the_frames_shown_only() -> None:
     assert r1.ego_speed_action([8.0 - 0.5 * k for k in range(9)]) == "slowing"
     assert r1.ego_speed_action([2.0 + 0.5 * k for k in range(9)]) == "speeding"
     assert r1.ego_speed_action([0.0] * 9) == "stopped"
-    # Slowed down, then speeding up again in the last second: neither class.
-    assert r1.ego_speed_action([8, 7, 6, 5, 4, 4.2, 4.4, 4.6, 4.8]) is None
+    # Slowed down, then speeding up again in the last second: neither class, no speed named.
+    assert r1.ego_speed_action([8, 7, 6, 5, 4, 4.2, 4.4, 4.6, 4.8]) == "moving"
+    # Creeping (below the driving speed) without standing: no clear class at all.
+    assert r1.ego_speed_action([1.0, 1.2, 1.0, 1.1, 1.0, 1.2, 1.1, 1.0, 1.1]) is None
+
+
+def test_speed_words_only_for_a_change_a_person_sees() -> None:
+    # Audit: 5.4 → 6.4 m/s over the 2 s shown was called "speeding up"; nobody sees +1 m/s.
+    assert r1.ego_speed_action([5.4 + 0.125 * k for k in range(9)]) == "moving"
+    # +2.5 m/s from 9 m/s (28 % of the slower end): the ground visibly moves faster.
+    assert r1.ego_speed_action([9.0 + 2.5 * k / 8 for k in range(9)]) == "speeding"
+    # 2 m/s at 18–20 m/s is only 11 %: not named; 2.5 m/s at 10 m/s is.
+    assert r1.ego_speed_action([20.0 - 0.25 * k for k in range(9)]) == "moving"
+    assert r1.ego_speed_action([12.6 - 2.6 * k / 8 for k in range(9)]) == "slowing"
+    # 1.5 m/s at 3–4.5 m/s is 50 % but below the 2 m/s floor.
+    assert r1.ego_speed_action([3.0 + 1.5 * k / 8 for k in range(9)]) == "moving"
 
 
 # -- colour words ---------------------------------------------------------------------------------
@@ -235,3 +259,42 @@ def test_bucket_edge_dead_band() -> None:
     assert not r1.in_edge_band(17.0, 0.0, 20.0) and not r1.in_edge_band(35.0, 20.0, 50.0)
     assert not r1.in_edge_band(46.0, 0.0, 20.0)  # another bucket's edge: Near is still clear
     assert not r1.in_edge_band(56.0, 50.0, math.inf)
+
+
+# -- R1_4: one situation, several wordings that say the same ---------------------------------------
+def _situation_moment(speeds: list[float], lead: ActorState | None = None) -> tuple[Moment, list[Frame]]:
+    ro = Rollout("s.toml", "s", "06_traffic_flow", "expert", 0, "eval")
+    x = 0.0
+    for k, v in enumerate(speeds):
+        actors = {} if lead is None else {lead.id: lead}
+        ro.states.append((0.25 * k, EgoState(x, 0.0, 0.0, v), actors))
+        ro.lights.append(RouteLight(100.0, "none"))
+        x += 0.25 * v
+    box = (700, 400, 900, 560)
+    shown = [] if lead is None else [Visible(lead, box, (800, 480), 15.0, 1.0, 9000, 9000, "red")]
+    frames = [Frame("CAM_FRONT", s, 0.25 * s, (1600, 900), b"", list(shown)) for s in range(0, 9, 2)]
+    return Moment(ro, 8), frames
+
+
+def test_situation_wordings_say_the_same() -> None:
+    m, frames = _situation_moment([5.4 + 0.125 * k for k in range(9)])
+    sit = r1.situation(m, frames)
+    assert sit is not None and sit.speed == "moving" and sit.cause == "clear"
+    # A change too small to see names no speed, in any wording.
+    assert len(set(sit.wordings)) == 3
+    for w in sit.wordings:
+        assert "I am going straight" in w and "road ahead is clear" in w
+        assert not any(word in w for word in ("speeding", "slowing", "steady", "km/h", "m/s"))
+    assert r1.situation_answer(m, frames) == "I am going straight because the road ahead is clear."
+    # A lead car of the ego's lane braking while the ego slows down clearly: every wording names
+    # the car, its colour and its braking, in the first person.
+    lead = ActorState(
+        id=7, kind="car", category="Vehicle", subtype="car", colour="red", rgb=(200, 30, 30),
+        x=30.0, y=0.0, yaw=0.0, speed_mps=5.0, length_m=4.5, width_m=1.8, height_m=1.5,
+        motion="traffic", braking=True, blinkers=0, status="moving",
+    )  # fmt: skip
+    m, frames = _situation_moment([12.0 - 0.5 * k for k in range(9)], lead)
+    sit = r1.situation(m, frames)
+    assert sit is not None and (sit.speed, sit.cause) == ("slowing", "lead")
+    for w in sit.wordings:
+        assert "slowing down" in w and "red car ahead of me" in w and "braking" in w and "ego" not in w

@@ -12,6 +12,7 @@ import itertools
 import math
 import random
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from . import quality
@@ -212,10 +213,25 @@ PED_WALKING_MPS = 0.5
 POSE_BOX_PX = 40
 
 
+def lamps_visible(m: Moment, v: Visible) -> bool:
+    """Whether the frame shows vehicle `v`'s brake lamps clearly (lit or dark): its back faces
+    the camera, near, large and whole enough."""
+    a = v.actor
+    # Lamps are at the rear: seen when the camera looks at the vehicle's back.
+    sight = math.atan2(a.y - m.ego.y, a.x - m.ego.x)
+    rel = abs((a.yaw - sight + math.pi) % (2 * math.pi) - math.pi)
+    return (
+        math.degrees(rel) <= REAR_VIEW_DEG
+        and v.bbox[2] - v.bbox[0] >= LAMP_BOX_PX
+        and v.distance_m <= LAMP_MAX_M
+        and v.visible_fraction >= LAMP_WHOLE
+    )
+
+
 def frame_status(m: Moment, f: Frame, v: Visible) -> str | None:
     """The status the frame itself shows for `v`, or None when it gives no cue."""
     a = v.actor
-    bw, bh = v.bbox[2] - v.bbox[0], v.bbox[3] - v.bbox[1]
+    bh = v.bbox[3] - v.bbox[1]
     if a.category == "Pedestrian":
         if bh < POSE_BOX_PX or v.visible_fraction < WHOLE_FIGURE:
             return None
@@ -227,15 +243,7 @@ def frame_status(m: Moment, f: Frame, v: Visible) -> str | None:
     if a.motion == "static":
         where = m.rollout.standing.get(a.id, "")
         return "parked" if where == "kerb" and not a.braking else None
-    # Lamps are at the rear: seen when the camera looks at the vehicle's back.
-    sight = math.atan2(a.y - m.ego.y, a.x - m.ego.x)
-    rel = abs((a.yaw - sight + math.pi) % (2 * math.pi) - math.pi)
-    if (
-        math.degrees(rel) > REAR_VIEW_DEG
-        or bw < LAMP_BOX_PX
-        or v.distance_m > LAMP_MAX_M
-        or v.visible_fraction < LAMP_WHOLE
-    ):
+    if not lamps_visible(m, v):
         return None
     if a.braking and a.speed_mps <= STILL_MPS:
         return "stopped"
@@ -391,7 +399,7 @@ def r1_2_b(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
 
 @register("R1_2_C", needs=Needs())
 def r1_2_c(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str, Any]]:
-    by_count: dict[int, list[Any]] = {}
+    by_count: dict[tuple[str, str, int], list[Any]] = {}
     for m, f in _front_frames(moments):
         for cat in CATEGORIES:
             if not _clear(f, cat):
@@ -423,8 +431,11 @@ def r1_2_c(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[s
                         "original_subtask_id": "L1-2-C",
                     }
                 )
-                by_count.setdefault(len(inside), []).append((rec, [f]))
+                by_count.setdefault((cat, name, len(inside)), []).append((rec, [f]))
     quality.passed(sum(len(v) for v in by_count.values()))
+    # Round-robin over (class, bucket, count): the class and bucket are in the question, and
+    # balanced over counts alone a text-only rule guessing one count per class and bucket
+    # (no cones far away) scored 52.7 against chance 33.0 on seed 2027.
     chosen = quality.balance_counts(by_count, n, rng)
     return _finish([c[0] for c in chosen], "R1_2_C", [c[1] for c in chosen])
 
@@ -575,7 +586,7 @@ R1_4_FRAMES = 5
 R1_4_STRIDE = 2  # 2 Hz: the five frames span the 2 s up to the moment
 # The original's wordings that ask for the ego's own action in general (its others name a van,
 # the rain or a sign), and two that also ask for the reason the answer gives. One situation is
-# asked at most once per wording (no repeated question+answer).
+# asked at most once per (question, answer wording) pair (no repeated question+answer).
 R1_4_QUESTIONS = (
     "What action are you currently taking as the driver?",
     "What are you doing right now and why?",
@@ -586,11 +597,15 @@ R1_4_QUESTIONS = (
 )
 # Only drivers whose motion is purposeful: the noisy expert's weaving is not a manoeuvre.
 R1_4_DRIVERS = ("expert", "late_expert", "cautious_expert")
-# Speed over the frames shown (first frame → last, and over the last second): a change of at
-# least SPEED_CHANGE_MPS that continues into the last second is slowing down / speeding up;
-# within STEADY_MPS over both spans is steady; anything between is not described.
+# Speed over the frames shown (first frame → last, and over the last second): a change a person
+# sees (at least SPEED_CHANGE_MPS and SPEED_CHANGE_SHARE of the slower end: the ground moves
+# visibly faster or slower between the frame pairs) that continues into the last second is
+# slowing down / speeding up; within STEADY_MPS over both spans is steady. A change between
+# the two is "moving": the answer names no speed (audit: +1 m/s over 2 s was called
+# "speeding up", which nobody sees without photogrammetry).
 STOPPED_MPS = 0.3
-SPEED_CHANGE_MPS = 1.0
+SPEED_CHANGE_MPS = 2.0
+SPEED_CHANGE_SHARE = 0.25
 LAST_SECOND_CHANGE_MPS = 0.3
 STEADY_MPS = 0.5
 MIN_DRIVING_MPS = 2.0
@@ -621,18 +636,22 @@ def _wrap(a: float) -> float:
 
 def ego_speed_action(speeds: Sequence[float]) -> str | None:
     """The speed part of the ego's action over the frames shown (`speeds` at 4 Hz from the
-    first frame to the last), or None when it is in no clear class."""
+    first frame to the last): "stopped", "slowing", "speeding", "steady", "moving" (driving,
+    with no speed change clear enough to name) or None (no clear class)."""
     v0, v_mid, v1 = speeds[0], speeds[-5], speeds[-1]
     if v1 < STOPPED_MPS:
         return "stopped" if v_mid < 1.0 else None
-    if v1 <= v0 - SPEED_CHANGE_MPS and v1 <= v_mid - LAST_SECOND_CHANGE_MPS:
+    clear = max(SPEED_CHANGE_MPS, SPEED_CHANGE_SHARE * min(v0, v1))
+    if v1 <= v0 - clear and v1 <= v_mid - LAST_SECOND_CHANGE_MPS:
         return "slowing"
-    if v1 >= v0 + SPEED_CHANGE_MPS and v1 >= v_mid + LAST_SECOND_CHANGE_MPS:
+    if v1 >= v0 + clear and v1 >= v_mid + LAST_SECOND_CHANGE_MPS:
         return "speeding"
+    if min(speeds) < MIN_DRIVING_MPS:
+        return None
     steady = abs(v1 - v0) <= STEADY_MPS and abs(v1 - v_mid) <= LAST_SECOND_CHANGE_MPS
-    if steady and min(speeds) >= MIN_DRIVING_MPS and max(speeds) - min(speeds) <= 2 * STEADY_MPS:
+    if steady and max(speeds) - min(speeds) <= 2 * STEADY_MPS:
         return "steady"
-    return None
+    return "moving"
 
 
 def ego_turn(yaws: Sequence[float]) -> str | None:
@@ -689,10 +708,22 @@ def ego_xy_of(m: Moment, x: float, y: float) -> tuple[float, float]:
     return dx * c + dy * s, -dx * s + dy * c
 
 
-def situation_answer(m: Moment, frames: list[Frame]) -> str | None:
-    """The reference answer: what the frames shown say the ego does, over those frames and
-    ending at the last one (never after it), and the visible cause. None when either is not
-    clear-cut (a weave, a slight bend, a slowing with nothing visible that causes it)."""
+@dataclass(frozen=True)
+class Situation:
+    """What the frames shown say the ego does and why: the action's parts, the kind of cause
+    ("pedestrian", "red", "lead", "turn", "green", "clear") and every wording of it (all say
+    the same, in one voice; the first is the reference wording)."""
+
+    speed: str
+    turn: str
+    cause: str
+    wordings: tuple[str, ...]
+
+
+def situation(m: Moment, frames: list[Frame]) -> Situation | None:
+    """What the frames shown say the ego does, over those frames and ending at the last one
+    (never after it), and the visible cause. None when either is not clear-cut (a weave, a
+    slight bend, a slowing with nothing visible that causes it)."""
     steps = range(frames[0].step, frames[-1].step + 1)
     egos = [m.rollout.states[s][1] for s in steps]
     speed = ego_speed_action([e.speed_mps for e in egos])
@@ -706,26 +737,60 @@ def situation_answer(m: Moment, frames: list[Frame]) -> str | None:
     light_near = light is not None and light.colour != "none" and light.distance_m <= LIGHT_MAX_M
     light_was = m.rollout.lights[frames[0].step] if m.rollout.lights else None
     turning = "" if turn == "straight" else f" and turning {turn}"
+
+    def out(cause: str, *wordings: str) -> Situation:
+        return Situation(speed, turn, cause, wordings)
+
     if speed in ("stopped", "slowing"):
         verb = "I am stopped" if speed == "stopped" else f"I am slowing down{turning}"
         if ped is not None:
-            return f"{verb} because a pedestrian is crossing the road ahead."
+            return out(
+                "pedestrian",
+                f"{verb} because a pedestrian is crossing the road ahead.",
+                f"A pedestrian is crossing the road ahead, so {verb}.",
+                f"{verb} for the pedestrian crossing the road ahead.",
+            )
         if light_near and light is not None and light.colour == "red":
-            return f"{verb} because the traffic light ahead is red."
+            return out(
+                "red",
+                f"{verb} because the traffic light ahead is red.",
+                f"The traffic light ahead is red, so {verb}.",
+                f"{verb} for the red traffic light ahead.",
+            )
         if lead is not None and (lead.actor.braking or not lead.actor.moving):
             state = "braking" if lead.actor.moving else "stopped"
-            return f"{verb} because the {_noun(lead)} ahead of me is {state}."
+            noun = _noun(lead)
+            return out(
+                "lead",
+                f"{verb} because the {noun} ahead of me is {state}.",
+                f"The {noun} ahead of me is {state}, so {verb}.",
+                f"{verb} behind the {noun} ahead of me, which is {state}.",
+            )
         if speed == "slowing" and turn != "straight" and not near:
-            return f"I am slowing down to turn {turn}; the road ahead is clear."
+            return out(
+                "turn",
+                f"I am slowing down to turn {turn}; the road ahead is clear.",
+                f"The road ahead is clear and I am slowing down to turn {turn}.",
+                f"I am slowing down for a {turn} turn; the road ahead is clear.",
+            )
         return None
     if ped is not None or (light_near and light is not None and light.colour != "green"):
         return None  # driving on toward a pedestrian or a red light: not a clear situation
-    verb = "I am speeding up" if speed == "speeding" else "I am driving at a steady speed"
-    verb += turning if turning else " and going straight"
+    # "moving": a speed change too small to see is not named.
+    how = {"speeding": "speeding up", "steady": "driving at a steady speed", "moving": ""}[speed]
+    where = f"turning {turn}" if turning else "going straight"
+    verb = f"I am {how} and {where}" if how else f"I am {where}"
     if lead is not None:
         if lead.actor.braking or not lead.actor.moving:
             return None
-        return f"{verb}, following the {_noun(lead)} ahead of me."
+        noun = _noun(lead)
+        rest = f", {how} and {where}" if how else f" and {where}"
+        return out(
+            "lead",
+            f"{verb}, following the {noun} ahead of me.",
+            f"I am following the {noun} ahead of me{rest}.",
+            f"{verb} behind the {noun} ahead of me.",
+        )
     if near:
         return None
     if (
@@ -736,12 +801,29 @@ def situation_answer(m: Moment, frames: list[Frame]) -> str | None:
         and light is not None
         and light.colour == "green"
     ):
-        return f"{verb} because the traffic light ahead has turned green."
-    return f"{verb} because the road ahead is clear."
+        return out(
+            "green",
+            f"{verb} because the traffic light ahead has turned green.",
+            f"The traffic light ahead has turned green, so {verb}.",
+            f"{verb}: the traffic light ahead has turned green.",
+        )
+    return out(
+        "clear",
+        f"{verb} because the road ahead is clear.",
+        f"The road ahead is clear, so {verb}.",
+        f"{verb}; the road ahead is clear.",
+    )
 
 
-# History frames at every regular anchor of the purposeful drivers: about one moment in twelve
-# gives a clear-cut situation not yet asked in that wording.
+def situation_answer(m: Moment, frames: list[Frame]) -> str | None:
+    """The reference answer (`situation`'s first wording), or None."""
+    sit = situation(m, frames)
+    return sit.wordings[0] if sit else None
+
+
+# History frames at every regular anchor of the purposeful drivers: about one moment in six
+# gives a clear-cut situation not yet asked in that (question, wording) pair (440–480 of the
+# ~2,800 on seeds 761971 and 12345, for 200 records).
 @register(
     "R1_4",
     needs=Needs(history=R1_4_FRAMES, history_stride=R1_4_STRIDE, oversample=20.0, drivers=R1_4_DRIVERS),
@@ -757,16 +839,18 @@ def r1_4(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str
         if frames is None:
             quality.dropped("moment without its 5 history frames")
             continue
-        answer = situation_answer(m, frames)
-        if answer is None:
+        sit = situation(m, frames)
+        if sit is None:
             quality.dropped("action or cause not clear-cut in the frames shown")
             continue
-        q = R1_4_QUESTIONS[len(seen) % len(R1_4_QUESTIONS)]
-        if f"{q}|{answer}" in seen:
-            q = next((x for x in R1_4_QUESTIONS if f"{x}|{answer}" not in seen), "")
-            if not q:
-                quality.dropped("question and answer already asked")
-                continue  # no two records share question and answer
+        # Every (question, wording) pair once: start at a rotating pair, take the first unasked.
+        pairs = [(q, a) for a in sit.wordings for q in R1_4_QUESTIONS]
+        start = len(seen) % len(pairs)
+        pair = next((p for p in pairs[start:] + pairs[:start] if "|".join(p) not in seen), None)
+        if pair is None:
+            quality.dropped("question and answer already asked")
+            continue  # no two records share question and answer
+        q, answer = pair
         seen.add(f"{q}|{answer}")
         rec = {
             "Question_id": None,
@@ -781,7 +865,7 @@ def r1_4(moments: Sequence[Moment], n: int, rng: random.Random) -> list[dict[str
             "original_subtask_id": "L1-4",
         }
         # Balanced over the kind of situation (the action and the cause's kind).
-        kind = answer.split(" because ")[-1].split(" ")[0] + "|" + " ".join(answer.split()[:4])
+        kind = f"{sit.speed}|{sit.turn != 'straight'}|{sit.cause}"
         groups.setdefault(kind, []).append((rec, frames))
     quality.passed(sum(len(v) for v in groups.values()))
     chosen = quality.balance_groups(groups, n, rng)

@@ -16,6 +16,7 @@ objects, or when a relation or state lies near a class boundary.
 
 from __future__ import annotations
 
+import itertools
 import math
 import random
 from collections.abc import Iterable, Sequence
@@ -140,6 +141,43 @@ def _ambiguous_ids(frames: Iterable[Frame], categories: Sequence[str]) -> tuple[
         clear.update(v.actor.id for v in f.visible if v.actor.category in categories)
         unclear.update(v.actor.id for v in f.blocking(categories))
     return clear, unclear - clear
+
+
+def sliver_only(frames: Sequence[Frame], ids: Iterable[int]) -> bool:
+    """Whether a counted object (`ids`) never shows a recognisable part of its body in `frames`
+    (`Visible.recognisable`): a roof sliver above a nearer car may or may not be counted."""
+    return any(not any(v.recognisable for f in frames for v in f.visible if v.actor.id == i) for i in ids)
+
+
+def identity_unclear(frames: Sequence[Frame], ids: Iterable[int]) -> bool:
+    """Whether the clip cannot tell one counted vehicle (`ids`) from another: one leaves the view
+    and comes back, or one leaves and a vehicle that looks alike (same kind, same or an unclear
+    colour word) enters later. At 2 Hz a person cannot track identity across such a gap."""
+    present: dict[int, list[int]] = {}
+    looks: dict[int, tuple[str, set[str]]] = {}
+    for k, f in enumerate(frames):
+        for v in [*f.visible, *f.blocking(VEHICLE_CATEGORIES)]:
+            if v.actor.category not in VEHICLE_CATEGORIES:
+                continue
+            if not present.get(v.actor.id) or present[v.actor.id][-1] != k:
+                present.setdefault(v.actor.id, []).append(k)
+            if v.colour:
+                looks.setdefault(v.actor.id, (v.actor.subtype, set()))[1].add(v.colour)
+            looks.setdefault(v.actor.id, (v.actor.subtype, set()))
+    counted = set(ids)
+    for i in counted:
+        ks = present.get(i, [])
+        if any(b - a > 1 for a, b in itertools.pairwise(ks)):
+            return True
+    for i in sorted(counted):
+        for j in sorted(present):
+            if j == i or i not in present:
+                continue
+            (si, ci), (sj, cj) = looks[i], looks[j]
+            alike = si == sj and (not ci or not cj or bool(ci & cj))
+            if alike and (present[i][-1] < present[j][0] or present[j][-1] < present[i][0]):
+                return True
+    return False
 
 
 def cyclist_shown(frames: Iterable[Frame]) -> bool:
@@ -273,6 +311,12 @@ def build_r2_2_a(moments: Sequence[Moment], n: int, rng: random.Random) -> list[
             continue
         if cyclist_shown(clip):
             dropped("a bicycle shown: is it a vehicle?")
+            continue
+        if sliver_only(clip, clear):
+            dropped("a counted vehicle shows only a sliver (e.g. its roof) in every frame")
+            continue
+        if identity_unclear(clip, clear):
+            dropped("a vehicle leaves the view and it or a look-alike enters later")
             continue
         actor_of = {v.actor.id: v for f in clip for v in f.visible if v.actor.id in clear}
         window = R2_2_A_FRAMES / 2.0

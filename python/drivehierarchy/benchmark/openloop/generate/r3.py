@@ -21,10 +21,18 @@ from collections.abc import Sequence
 from typing import Any
 
 from .quality import dropped, passed
+from .r1 import lamps_visible
 from .r2 import _balance_by, _finish, image_path, point_is_unique, sample_token, scene_token
 from .rollout import BLINKER_LEFT, BLINKER_RIGHT, DECISION_HZ, FRONT, WHOLE_FIGURE, Moment, Needs, register
 
 HORIZON_S = 3.0
+# Vehicles asked about show at least this share of themselves (image border and occluders
+# count as hidden): a cut-off vehicle may hide its indicator or lamps (audit: a truck 31 % cut
+# off at a roundabout entry).
+TARGET_WHOLE = 0.9
+# Scenario categories (by a word of their name) whose lanes curve: a heading swing there is
+# no turn cue.
+CURVED_CATEGORIES = ("roundabout",)
 # Actors farther than this are a few pixels wide: not asked about.
 OUTCOME_MAX_DISTANCE_M = 40.0
 R3_1_QUESTION = "What is the future state of the {desc}. located at [{x0:.1f}, {y0:.1f}, {x1:.1f}, {y1:.1f}]?"
@@ -53,11 +61,15 @@ DISTRACTORS: dict[str, tuple[str, ...]] = {
     TURN_RIGHT: (STRAIGHT, TURN_LEFT, LANE_LEFT, BACK_UP, REVERSE_PARKING, STATIONARY),
     LANE_LEFT: (TURN_LEFT, TURN_RIGHT, LANE_RIGHT, BACK_UP, REVERSE_PARKING, STATIONARY),
     LANE_RIGHT: (TURN_LEFT, TURN_RIGHT, LANE_LEFT, BACK_UP, REVERSE_PARKING, STATIONARY),
-    STRAIGHT: (TURN_LEFT, TURN_RIGHT, LANE_LEFT, LANE_RIGHT, BACK_UP, BRAKE_STOP, STATIONARY, ACCELERATE),
-    ACCELERATE: (*_PATH_FALSE, BRAKE_STOP, DECELERATE),
-    DECELERATE: (*_PATH_FALSE, ACCELERATE, BRAKE_STOP),
+    # (Not "Accelerate": a moving car with dark lamps may be speeding up. "Brake gently to a
+    # stop" only where its dark brake lamps show: `speed_distractors`.)
+    STRAIGHT: (TURN_LEFT, TURN_RIGHT, LANE_LEFT, LANE_RIGHT, BACK_UP, STATIONARY),
+    # Asked only from a visible standstill (lamps lit, standing): it cannot be slowing down.
+    # (Not "Brake gently to a stop": a standing car that stays put fits it as well.)
+    ACCELERATE: (*_PATH_FALSE, DECELERATE),
     BRAKE_STOP: (TURN_LEFT, TURN_RIGHT, LANE_LEFT, LANE_RIGHT, BACK_UP, REVERSE_PARKING, ACCELERATE),
-    STATIONARY: (STRAIGHT, TURN_LEFT, TURN_RIGHT, LANE_LEFT, LANE_RIGHT, BACK_UP, ACCELERATE),
+    # (Not "Accelerate": a car standing with its lamps lit may move off at any moment.)
+    STATIONARY: (STRAIGHT, TURN_LEFT, TURN_RIGHT, LANE_LEFT, LANE_RIGHT, BACK_UP),
 }
 PEDESTRIAN_DISTRACTORS: dict[str, tuple[str, ...]] = {
     STRAIGHT: (TURN_LEFT, TURN_RIGHT, BACK_UP, STATIONARY),
@@ -111,17 +123,38 @@ def vehicle_outcome(v0: float, yaw0: float, x0: float, y0: float, future: Sequen
 
 # A turn or lane change is asked only when the frame shows it coming: the vehicle's indicator on
 # that side is lit, or (turns) its heading has already swung by CUE_YAW_DEG over the last
-# CUE_PAST_S toward that side, so it stands visibly askew to its lane. Without a cue, "keep going
-# straight" fits the frame as well. An oncoming vehicle (heading more than 90° from the ego's) is
-# never asked about a lane change: its left and right are the viewer's right and left.
+# CUE_PAST_S toward that side after STRAIGHT_BEFORE_S of driving straight (within STRAIGHT_BEFORE_DEG),
+# so it stands visibly askew to the lane it came along. On a curve or in a roundabout a vehicle
+# following its lane swings as much without standing askew to anything: there (and whenever the
+# heading before is unknown) only the indicator counts. Without a cue, "keep going straight" fits
+# the frame as well. An oncoming vehicle (heading more than 90° from the ego's) is never asked
+# about a lane change: its left and right are the viewer's right and left.
+# Speed changes need their cue too: "Accelerate and go ahead" only from a visible standstill
+# (standing with its brake lamps lit, seen from behind), "Brake gently to a stop" only with its
+# brake lamps lit and seen; "Decelerate gradually without braking" has no cue in a still frame
+# (dark lamps look the same at a steady speed) and is not asked.
 CUE_YAW_DEG = 15.0
-CUE_PAST_S = 1.0
+CUE_PAST_S = 2.0
+STRAIGHT_BEFORE_S = 1.0
+STRAIGHT_BEFORE_DEG = 3.0
+STANDING_MPS = 0.05
 _LEFT_SIDE = {TURN_LEFT: True, LANE_LEFT: True, TURN_RIGHT: False, LANE_RIGHT: False}
 
 
-def frame_cue(outcome: str, a: Any, past_yaw: float | None, ego_yaw: float) -> bool:
+def frame_cue(
+    outcome: str,
+    a: Any,
+    past_yaw: float | None,
+    ego_yaw: float,
+    *,
+    before_yaw: float | None = None,
+    curved: bool = False,
+    lamps_seen: bool = False,
+) -> bool:
     """Whether the frame that shows vehicle `a` (an `ActorState`) gives a cue for `outcome`.
-    `past_yaw` is its heading CUE_PAST_S before the frame (None when unknown)."""
+    `past_yaw` is its heading CUE_PAST_S before the frame and `before_yaw` STRAIGHT_BEFORE_S
+    earlier (None when unknown); `curved`: it drives on a curve or in a roundabout;
+    `lamps_seen`: its rear (brake lamps) shows clearly in the frame."""
     lit_left, lit_right = bool(a.blinkers & BLINKER_LEFT), bool(a.blinkers & BLINKER_RIGHT)
     if outcome in _LEFT_SIDE:
         left = _LEFT_SIDE[outcome]
@@ -129,13 +162,29 @@ def frame_cue(outcome: str, a: Any, past_yaw: float | None, ego_yaw: float) -> b
             return False
         if lit_left != lit_right and lit_left == left:
             return True
-        swung = _wrap_deg(a.yaw - past_yaw) if past_yaw is not None else 0.0
-        return outcome in (TURN_LEFT, TURN_RIGHT) and abs(swung) >= CUE_YAW_DEG and (swung > 0) == left
+        if outcome not in (TURN_LEFT, TURN_RIGHT) or curved or past_yaw is None or before_yaw is None:
+            return False
+        if abs(_wrap_deg(past_yaw - before_yaw)) > STRAIGHT_BEFORE_DEG:
+            return False  # already swinging before: a curve, not a turn off the lane
+        swung = _wrap_deg(a.yaw - past_yaw)
+        return abs(swung) >= CUE_YAW_DEG and (swung > 0) == left
     if lit_left or lit_right:
         return False  # an indicator lit: a turn or lane change fits the frame too
     if outcome == STATIONARY:
         return bool(a.braking or a.motion == "static")
-    return True
+    if outcome == ACCELERATE:
+        return lamps_seen and a.braking and a.speed_mps <= STANDING_MPS
+    if outcome == BRAKE_STOP:
+        return lamps_seen and a.braking
+    return outcome != DECELERATE
+
+
+def speed_distractors(outcome: str, pool: Sequence[str], a: Any, lamps_seen: bool) -> list[str]:
+    """`pool` with "Brake gently to a stop" offered against "Keep going straight" only where the
+    frame rules it out (the brake lamps show, dark)."""
+    if outcome == STRAIGHT and lamps_seen and not a.braking:
+        return [*pool, BRAKE_STOP]
+    return list(pool)
 
 
 def pedestrian_outcome(v0: float, yaw0: float, future: Sequence[Any]) -> str | None:
@@ -148,8 +197,8 @@ def pedestrian_outcome(v0: float, yaw0: float, future: Sequence[Any]) -> str | N
     return None
 
 
-def _past_yaw(m: Moment, actor_id: int) -> float | None:
-    k = m.step - round(CUE_PAST_S * DECISION_HZ)
+def _past_yaw(m: Moment, actor_id: int, back_s: float = CUE_PAST_S) -> float | None:
+    k = m.step - round(back_s * DECISION_HZ)
     if k < 0:
         return None
     past = m.rollout.states[k][2].get(actor_id)
@@ -182,11 +231,24 @@ def build_r3_1(moments: Sequence[Moment], n: int, rng: random.Random) -> list[di
                     dropped("a pedestrian cut off or half hidden")
                     continue  # walking or standing cannot be told from a cut-off figure
                 outcome = pedestrian_outcome(a.speed_mps, a.yaw, future)
-                pool = PEDESTRIAN_DISTRACTORS.get(outcome or "", ())
+                pool = list(PEDESTRIAN_DISTRACTORS.get(outcome or "", ()))
             else:
+                if target.visible_fraction < TARGET_WHOLE:
+                    dropped("a vehicle cut off or partly hidden")
+                    continue  # its indicators, lamps or heading may be out of sight
                 outcome = vehicle_outcome(a.speed_mps, a.yaw, a.x, a.y, future)
-                pool = DISTRACTORS.get(outcome or "", ())
-                if outcome is not None and not frame_cue(outcome, a, _past_yaw(m, a.id), m.ego.yaw):
+                seen = lamps_visible(m, target)
+                pool = speed_distractors(outcome or "", DISTRACTORS.get(outcome or "", ()), a, seen)
+                cue = outcome is not None and frame_cue(
+                    outcome,
+                    a,
+                    _past_yaw(m, a.id),
+                    m.ego.yaw,
+                    before_yaw=_past_yaw(m, a.id, CUE_PAST_S + STRAIGHT_BEFORE_S),
+                    curved=any(c in m.category for c in CURVED_CATEGORIES),
+                    lamps_seen=seen,
+                )
+                if outcome is not None and not cue:
                     dropped("no cue in the frame for the vehicle's next move")
                     continue
             if outcome is None:

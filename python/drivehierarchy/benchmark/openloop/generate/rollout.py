@@ -69,6 +69,14 @@ MIN_VISIBLE_FRACTION = 0.35
 # both it is a speck nobody is expected to see.
 DEAD_BAND_SHARE = 0.25
 DEAD_BAND_PART_PX = 40
+# A counted object shows a recognisable part of its body in some frame: its unoccluded pixels
+# span at least RECOGNISABLE_W_PX × RECOGNISABLE_H_PX, or RECOGNISABLE_HEIGHT_SHARE of its
+# silhouette's height (a small far car shown whole qualifies). Audit: a car 96 m away behind a
+# nearer one showed its top 10 of 18 rows (roof and windows, 24 × 10 px): 57 % of its pixels,
+# since the upper rows are the full width, but only a grey sliver to a reader.
+RECOGNISABLE_W_PX = 20
+RECOGNISABLE_H_PX = 15
+RECOGNISABLE_HEIGHT_SHARE = 2 / 3
 
 # nuScenes-like rig (the Rust `CameraConfig::surround_rig`), rendered at IMAGE_SIZE.
 _RIG: dict[str, tuple[float, float, float, float]] = {  # forward, left, yaw, fov
@@ -229,6 +237,17 @@ class Visible:
     visible_pixels: int  # unoccluded silhouette pixels
     # Colour word of the actor in this image (`shown_colour`; "" when none is clear).
     colour: str = ""
+    # Box of the unoccluded pixels only, pixel xyxy like `bbox` (all 0 when unknown).
+    visible_box: tuple[int, int, int, int] = (0, 0, 0, 0)
+
+    @property
+    def recognisable(self) -> bool:
+        """Whether what shows of it is a recognisable part of its body (RECOGNISABLE_*): not
+        only a sliver such as a roof above a nearer car."""
+        x0, y0, x1, y1 = self.visible_box
+        w, h = x1 - x0 + 1, y1 - y0 + 1
+        whole_h = self.bbox[3] - self.bbox[1] + 1
+        return (w >= RECOGNISABLE_W_PX and h >= RECOGNISABLE_H_PX) or h >= RECOGNISABLE_HEIGHT_SHARE * whole_h
 
 
 def in_dead_band(v: Visible) -> bool:
@@ -506,6 +525,11 @@ def _visible(
         ok = (
             vis >= MIN_VISIBLE_PIXELS and frac >= MIN_VISIBLE_FRACTION and box[2] > box[0] and box[3] > box[1]
         )
+        vx0, vy0, vx1, vy1 = (float(v) for v in p.get("visible_bbox_px", (0, 0, 0, 0)))
+        vbox = (0, 0, 0, 0)
+        if vx1 > vx0:
+            vx, vy = min(w - 1, math.ceil(vx1) - 1), min(h - 1, math.ceil(vy1) - 1)
+            vbox = (max(0, int(vx0)), max(0, int(vy0)), vx, vy)
         (out if ok else partial).append(
             Visible(
                 actor=a,
@@ -516,6 +540,7 @@ def _visible(
                 pixel_count=total,
                 visible_pixels=vis,
                 colour=shown_colour(a.colour, p.get("colour_name")) if vis else "",
+                visible_box=vbox,
             )
         )
     out.sort(key=lambda v: (v.distance_m, v.actor.id))
