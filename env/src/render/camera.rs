@@ -533,6 +533,13 @@ impl Renderer {
                     continue;
                 }
                 let col = fogged(cols[sg.mat as usize], look.fog_k(d), look.fog);
+                // In front of the near plane: one quad with anti-aliased long sides (edges 0
+                // and 2); the ends stay hard so consecutive pieces join without a seam.
+                if q.iter().all(|p| p[2] >= NEAR) {
+                    let quad = q.map(|p| cam.project(p));
+                    b.fill_convex_aa(&quad, col, 0b0101);
+                    continue;
+                }
                 for tri in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
                     let n = cam.clip_project(tri, &mut poly);
                     b.fill_convex(&poly[..n], col);
