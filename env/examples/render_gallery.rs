@@ -1,5 +1,6 @@
 //! The rendering gallery of docs/rendering.md: people walking and standing at 10/25/40 m, each
-//! vehicle body at 15 and 60 m, every palette colour, and a curved road's markings, all on
+//! vehicle body at 15 and 60 m, every palette colour, a curved road's markings and a signalised
+//! approach's stop lines and kerbs, all on
 //! town01 through the protocol's 800×450 front camera (what a model sees, no supersampling).
 //! Next to each frame it writes a ×4 nearest-neighbour crop around the subject, so a reviewer
 //! sees the actual pixels.
@@ -182,6 +183,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let lead = ActorView { braking: true, ..view(9, ActorKind::Car, bat(22.0, 0.0), [36, 88, 204]) };
     let c = shot.take("curve_markings", &bego, &[lead], None, true);
     shot.md.push(format!("\n### Curved road\n\n{c}"));
+
+    // Road surface at a signalised approach: stop lines across both lanes, kerbs along the
+    // road edges, the lanes' darker wheel tracks; front and BEV.
+    let stop = net.stop_line(lane);
+    let sego = view(0, ActorKind::Car, Pose::new(stop.local_to_world(-20.0, 0.0), stop.yaw), [30, 110, 230]);
+    let c = shot.take("stop_line_kerbs", &sego, &[], None, true);
+    shot.md.push(format!("\n### Road surface: stop line, kerbs, wheel tracks\n\n{c}"));
 
     println!("{}", shot.md.join("\n"));
     Ok(())

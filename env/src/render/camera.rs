@@ -173,6 +173,7 @@ pub struct ProjectedActor {
 
 const NEAR: f32 = 0.1;
 const MARKING_MAX_M: f32 = 130.0;
+const TRACK_MAX_M: f32 = 60.0;
 /// Actors nearer than this get their detailed mesh (rounder wheels).
 const DETAIL_M: f64 = 35.0;
 
@@ -184,6 +185,8 @@ fn mat_colors() -> [[u8; 3]; N_MATS] {
     c[Mat::BikeLane as usize] = [120, 80, 78];
     c[Mat::White as usize] = [238, 238, 232];
     c[Mat::Yellow as usize] = [235, 190, 40];
+    c[Mat::Kerb as usize] = [196, 194, 188];
+    c[Mat::Track as usize] = [81, 81, 85];
     c
 }
 
@@ -473,7 +476,7 @@ impl Renderer {
         if !look.is_noon_clear() {
             for (i, c) in cols.iter_mut().enumerate() {
                 *c = look.lit(*c);
-                if i == Mat::Road as usize || i == Mat::Junction as usize {
+                if i == Mat::Road as usize || i == Mat::Junction as usize || i == Mat::Track as usize {
                     *c = c.map(|v| (v as f32 * look.road) as u8);
                 }
             }
@@ -513,9 +516,12 @@ impl Renderer {
                 let d = (mid[0] * mid[0] + mid[1] * mid[1]).sqrt();
                 // Far markings shrink below a pixel and turn into speckle: widen them up to
                 // 60 m, drop them past MARKING_MAX_M.
-                if d > MARKING_MAX_M {
+                if d > MARKING_MAX_M || (sg.mat == Mat::Track && d > TRACK_MAX_M) {
                     continue;
                 }
+                // Wheel tracks are texture, not paint: never widened, so they fade out with
+                // distance instead of turning into lines.
+                let min_px = if sg.mat == Mat::Track { 0.0 } else { min_px };
                 // Width from each end's own distance, so joined pieces share their end edges.
                 let hw_at = |p: [f32; 2]| {
                     let dd = ((p[0] - cam.pos[0]).powi(2) + (p[1] - cam.pos[1]).powi(2)).sqrt();
