@@ -136,6 +136,6 @@ fn kerbs_and_wheel_tracks_show_on_the_camera() {
     assert!(runs >= 2, "wheel tracks missing in the ego lane: {runs} dark runs");
     // A kerb-coloured run right of the ego's lane (its right edge line, then the kerb).
     let kerb = [196u8, 194, 188];
-    assert!(row[400..].iter().any(|p| *p == kerb), "no kerb right of the lane");
+    assert!(row[400..].contains(&kerb), "no kerb right of the lane");
     // (The BEV skips both: its golden images under env/tests/golden pin that.)
 }
