@@ -9,28 +9,15 @@
 //!
 //! Prints the Markdown that embeds the images (paths relative to docs/).
 
+mod common;
+
+use common::{frame, view, Town};
 use dh_env::geom::Pose;
-use dh_env::map::Network;
 use dh_env::render::palette::PALETTE;
-use dh_env::render::{render_and_project, render_bev, BevConfig, CameraConfig, FrameInput, Image, RenderMap};
+use dh_env::render::{render_and_project, render_bev, BevConfig, CameraConfig, Image, RenderMap};
 use dh_env::view::{ActorKind, ActorView};
 use std::f64::consts::{FRAC_PI_2, PI};
-use std::path::{Path, PathBuf};
-
-fn view(id: u32, kind: ActorKind, pose: Pose, color: [u8; 3]) -> ActorView {
-    ActorView {
-        id,
-        kind,
-        pose,
-        speed_mps: 0.0,
-        length_m: 0.0,
-        width_m: 0.0,
-        height_m: 0.0,
-        color,
-        braking: false,
-        blinkers: 0,
-    }
-}
+use std::path::PathBuf;
 
 /// Nearest-neighbour crop of `img` around `bbox` (padded, at least `min` px square), scaled ×k.
 fn zoom(img: &Image, bbox: [f32; 4], k: u32, min: u32) -> Image {
@@ -67,14 +54,7 @@ impl Shot<'_> {
         subject: Option<u32>,
         bev: bool,
     ) -> String {
-        let frame = FrameInput {
-            ego,
-            actors,
-            lights: &[],
-            signs: &[],
-            route_points: &[],
-            ambience: Default::default(),
-        };
+        let frame = frame(ego, actors, Default::default());
         let mut img = Image::default();
         let found = render_and_project(self.map, &frame, &CameraConfig::front(), &mut img).unwrap();
         let file = format!("{name}.png");
@@ -100,20 +80,14 @@ impl Shot<'_> {
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args: Vec<String> = std::env::args().collect();
-    if args.len() < 3 {
-        return Err("usage: render_gallery TOWN01_NET OUT_DIR".into());
-    }
-    let net = Network::from_file(Path::new(&args[1]))?;
-    let map = RenderMap::build(&net);
-    let dir = PathBuf::from(&args[2]);
-    std::fs::create_dir_all(&dir)?;
-    let mut shot = Shot { map: &map, dir, md: Vec::new() };
+    let town = Town::from_args("render_gallery")?;
+    let net = &town.net;
+    let mut shot = Shot { map: &town.map, dir: town.dir.clone(), md: Vec::new() };
 
     let lane = net.lane_by_id("W2C_1").ok_or("town01 has no lane W2C_1")?;
-    let ego_pose = net.lane_position(lane, net.lanes[lane].shape.length() - 75.0);
+    let ego_pose = town.approach("W2C_1", 75.0)?;
     let ego = view(0, ActorKind::Car, ego_pose, [30, 110, 230]);
-    let at = |f: f64, l: f64, dyaw: f64| Pose::new(ego_pose.local_to_world(f, l), ego_pose.yaw + dyaw);
+    let at = |f: f64, l: f64, dyaw: f64| common::at(ego_pose, f, l, dyaw);
 
     // People: walking across the lane (from the right) and standing at the kerb, facing the road.
     shot.md.push("### People\n\n| distance | walking (1.4 m/s) | standing |\n|---|---|---|".into());
