@@ -113,6 +113,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     bike2.speed_mps = 5.0;
     let c3 = shot.take("cyclist_ahead_25m", &ego, &[bike2], Some(6), false);
     shot.md.push(format!("\n| adult and child, 14 m | cyclist crossing, 15 m | cyclist ahead, 25 m |\n|---|---|---|\n| {c1} | {c2} | {c3} |"));
+    // Wheelchair users (ids 29 and 38 are among the one adult pedestrian in 16 drawn so).
+    let mut roller = view(29, ActorKind::Pedestrian, at(12.0, -1.0, FRAC_PI_2), [36, 88, 204]);
+    roller.speed_mps = 1.0;
+    let w1 = shot.take("wheelchair_crossing_12m", &ego, &[roller], Some(29), false);
+    let waiting = view(38, ActorKind::Pedestrian, at(25.0, -4.6, FRAC_PI_2), [200, 32, 32]);
+    let w2 = shot.take("wheelchair_waiting_25m", &ego, &[waiting], Some(38), false);
+    shot.md.push(format!("\n| wheelchair user crossing, 12 m | wheelchair user at the kerb, 25 m |\n|---|---|\n| {w1} | {w2} |"));
 
     // Vehicles: rear three-quarter view in the ego lane (15 m, braking) and head-on in the
     // oncoming lane (60 m).
