@@ -7,51 +7,27 @@
 //!
 //! Prints the Markdown that embeds the images (paths relative to docs/).
 
+mod common;
+
+use common::{at, frame, view, Town};
 use dh_env::conditions::Conditions;
-use dh_env::geom::Pose;
-use dh_env::map::Network;
-use dh_env::render::{
-    render_bev, render_camera, Ambience, BevConfig, CameraConfig, CameraFault, FrameInput, Image, RenderMap,
-};
+use dh_env::render::{render_bev, render_camera, Ambience, BevConfig, CameraConfig, CameraFault, Image};
 use dh_env::view::{ActorKind, ActorView};
 use std::f64::consts::{FRAC_PI_2, PI};
-use std::path::{Path, PathBuf};
-
-fn view(id: u32, kind: ActorKind, pose: Pose, color: [u8; 3], speed: f64) -> ActorView {
-    ActorView {
-        id,
-        kind,
-        pose,
-        speed_mps: speed,
-        length_m: 0.0,
-        width_m: 0.0,
-        height_m: 0.0,
-        color,
-        braking: false,
-        blinkers: 0,
-    }
-}
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args: Vec<String> = std::env::args().collect();
-    if args.len() < 3 {
-        return Err("usage: render_conditions TOWN01_NET OUT_DIR".into());
-    }
-    let net = Network::from_file(Path::new(&args[1]))?;
-    let map = RenderMap::build(&net);
-    let dir = PathBuf::from(&args[2]);
-    std::fs::create_dir_all(&dir)?;
-
-    let lane = net.lane_by_id("W2C_1").ok_or("town01 has no lane W2C_1")?;
-    let ego_pose = net.lane_position(lane, net.lanes[lane].shape.length() - 60.0);
-    let ego = view(0, ActorKind::Car, ego_pose, [30, 110, 230], 6.0);
-    let at = |f: f64, l: f64, dyaw: f64| Pose::new(ego_pose.local_to_world(f, l), ego_pose.yaw + dyaw);
-    let mut lead = view(1, ActorKind::Car, at(16.0, 0.0, 0.0), [200, 40, 40], 3.0);
+    let town = Town::from_args("render_conditions")?;
+    let (map, dir) = (&town.map, &town.dir);
+    let ego_pose = town.approach("W2C_1", 60.0)?;
+    let moving = |v: ActorView, speed_mps: f64| ActorView { speed_mps, ..v };
+    let ego = moving(view(0, ActorKind::Car, ego_pose, [30, 110, 230]), 6.0);
+    let at = |f: f64, l: f64, dyaw: f64| at(ego_pose, f, l, dyaw);
+    let mut lead = moving(view(1, ActorKind::Car, at(16.0, 0.0, 0.0), [200, 40, 40]), 3.0);
     lead.braking = true;
-    let oncoming = view(2, ActorKind::Car, at(34.0, 3.4, PI), [230, 230, 230], 7.0);
-    let van = view(3, ActorKind::Car, at(55.0, 3.4, PI), [220, 180, 30], 7.0);
+    let oncoming = moving(view(2, ActorKind::Car, at(34.0, 3.4, PI), [230, 230, 230]), 7.0);
+    let van = moving(view(3, ActorKind::Car, at(55.0, 3.4, PI), [220, 180, 30]), 7.0);
     let van = ActorView { length_m: 5.2, width_m: 2.0, height_m: 2.3, ..van };
-    let walker = view(4, ActorKind::Pedestrian, at(24.0, -4.3, FRAC_PI_2), [40, 150, 70], 0.0);
+    let walker = view(4, ActorKind::Pedestrian, at(24.0, -4.3, FRAC_PI_2), [40, 150, 70]);
     let actors = [lead, oncoming, van, walker];
 
     let names = ["noon", "dusk", "night", "overcast", "rain", "fog", "night+rain", "dusk+fog"];
@@ -61,10 +37,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for name in names {
         let conditions = Conditions::parse(name)?;
         let ambience = Ambience { conditions, seed: 7, tick: 120 };
-        let frame =
-            FrameInput { ego: &ego, actors: &actors, lights: &[], signs: &[], route_points: &[], ambience };
-        render_camera(&map, &frame, &CameraConfig::front(), &mut front)?;
-        render_bev(&map, &frame, &BevConfig::default(), &mut bev)?;
+        let frame = frame(&ego, &actors, ambience);
+        render_camera(map, &frame, &CameraConfig::front(), &mut front)?;
+        render_bev(map, &frame, &BevConfig::default(), &mut bev)?;
         let file = name.replace('+', "_");
         front.save(dir.join(format!("{file}.png")))?;
         match &bev0 {
@@ -79,15 +54,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         md.push(format!("| `{name}` | ![{name}](gallery/conditions/{file}.png) |"));
     }
-    let frame = FrameInput {
-        ego: &ego,
-        actors: &actors,
-        lights: &[],
-        signs: &[],
-        route_points: &[],
-        ambience: Ambience::default(),
-    };
-    render_camera(&map, &frame, &CameraConfig::front(), &mut front)?;
+    let frame = frame(&ego, &actors, Ambience::default());
+    render_camera(map, &frame, &CameraConfig::front(), &mut front)?;
     CameraFault::Dirty.apply(&mut front, &mut None, 7, 0);
     front.save(dir.join("fault_dirty.png"))?;
     md.push(String::new());

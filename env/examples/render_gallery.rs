@@ -1,5 +1,6 @@
 //! The rendering gallery of docs/rendering.md: people walking and standing at 10/25/40 m, each
-//! vehicle body at 15 and 60 m, every palette colour, and a curved road's markings, all on
+//! vehicle body at 15 and 60 m, every palette colour, a curved road's markings and a signalised
+//! approach's stop lines and kerbs, all on
 //! town01 through the protocol's 800×450 front camera (what a model sees, no supersampling).
 //! Next to each frame it writes a ×4 nearest-neighbour crop around the subject, so a reviewer
 //! sees the actual pixels.
@@ -8,28 +9,15 @@
 //!
 //! Prints the Markdown that embeds the images (paths relative to docs/).
 
+mod common;
+
+use common::{frame, view, Town};
 use dh_env::geom::Pose;
-use dh_env::map::Network;
 use dh_env::render::palette::PALETTE;
-use dh_env::render::{render_and_project, render_bev, BevConfig, CameraConfig, FrameInput, Image, RenderMap};
+use dh_env::render::{render_and_project, render_bev, BevConfig, CameraConfig, Image, RenderMap};
 use dh_env::view::{ActorKind, ActorView};
 use std::f64::consts::{FRAC_PI_2, PI};
-use std::path::{Path, PathBuf};
-
-fn view(id: u32, kind: ActorKind, pose: Pose, color: [u8; 3]) -> ActorView {
-    ActorView {
-        id,
-        kind,
-        pose,
-        speed_mps: 0.0,
-        length_m: 0.0,
-        width_m: 0.0,
-        height_m: 0.0,
-        color,
-        braking: false,
-        blinkers: 0,
-    }
-}
+use std::path::PathBuf;
 
 /// Nearest-neighbour crop of `img` around `bbox` (padded, at least `min` px square), scaled ×k.
 fn zoom(img: &Image, bbox: [f32; 4], k: u32, min: u32) -> Image {
@@ -66,14 +54,7 @@ impl Shot<'_> {
         subject: Option<u32>,
         bev: bool,
     ) -> String {
-        let frame = FrameInput {
-            ego,
-            actors,
-            lights: &[],
-            signs: &[],
-            route_points: &[],
-            ambience: Default::default(),
-        };
+        let frame = frame(ego, actors, Default::default());
         let mut img = Image::default();
         let found = render_and_project(self.map, &frame, &CameraConfig::front(), &mut img).unwrap();
         let file = format!("{name}.png");
@@ -99,20 +80,14 @@ impl Shot<'_> {
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args: Vec<String> = std::env::args().collect();
-    if args.len() < 3 {
-        return Err("usage: render_gallery TOWN01_NET OUT_DIR".into());
-    }
-    let net = Network::from_file(Path::new(&args[1]))?;
-    let map = RenderMap::build(&net);
-    let dir = PathBuf::from(&args[2]);
-    std::fs::create_dir_all(&dir)?;
-    let mut shot = Shot { map: &map, dir, md: Vec::new() };
+    let town = Town::from_args("render_gallery")?;
+    let net = &town.net;
+    let mut shot = Shot { map: &town.map, dir: town.dir.clone(), md: Vec::new() };
 
     let lane = net.lane_by_id("W2C_1").ok_or("town01 has no lane W2C_1")?;
-    let ego_pose = net.lane_position(lane, net.lanes[lane].shape.length() - 75.0);
+    let ego_pose = town.approach("W2C_1", 75.0)?;
     let ego = view(0, ActorKind::Car, ego_pose, [30, 110, 230]);
-    let at = |f: f64, l: f64, dyaw: f64| Pose::new(ego_pose.local_to_world(f, l), ego_pose.yaw + dyaw);
+    let at = |f: f64, l: f64, dyaw: f64| common::at(ego_pose, f, l, dyaw);
 
     // People: walking across the lane (from the right) and standing at the kerb, facing the road.
     shot.md.push("### People\n\n| distance | walking (1.4 m/s) | standing |\n|---|---|---|".into());
@@ -138,6 +113,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     bike2.speed_mps = 5.0;
     let c3 = shot.take("cyclist_ahead_25m", &ego, &[bike2], Some(6), false);
     shot.md.push(format!("\n| adult and child, 14 m | cyclist crossing, 15 m | cyclist ahead, 25 m |\n|---|---|---|\n| {c1} | {c2} | {c3} |"));
+    // Wheelchair users (ids 29 and 38 are among the one adult pedestrian in 16 drawn so).
+    let mut roller = view(29, ActorKind::Pedestrian, at(12.0, -1.0, FRAC_PI_2), [36, 88, 204]);
+    roller.speed_mps = 1.0;
+    let w1 = shot.take("wheelchair_crossing_12m", &ego, &[roller], Some(29), false);
+    let waiting = view(38, ActorKind::Pedestrian, at(25.0, -4.6, FRAC_PI_2), [200, 32, 32]);
+    let w2 = shot.take("wheelchair_waiting_25m", &ego, &[waiting], Some(38), false);
+    shot.md.push(format!("\n| wheelchair user crossing, 12 m | wheelchair user at the kerb, 25 m |\n|---|---|\n| {w1} | {w2} |"));
 
     // Vehicles: rear three-quarter view in the ego lane (15 m, braking) and head-on in the
     // oncoming lane (60 m).
@@ -182,6 +164,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let lead = ActorView { braking: true, ..view(9, ActorKind::Car, bat(22.0, 0.0), [36, 88, 204]) };
     let c = shot.take("curve_markings", &bego, &[lead], None, true);
     shot.md.push(format!("\n### Curved road\n\n{c}"));
+
+    // Road surface at a signalised approach: stop lines across both lanes, kerbs along the
+    // road edges, the lanes' darker wheel tracks; front and BEV.
+    let stop = net.stop_line(lane);
+    let sego = view(0, ActorKind::Car, Pose::new(stop.local_to_world(-20.0, 0.0), stop.yaw), [30, 110, 230]);
+    let c = shot.take("stop_line_kerbs", &sego, &[], None, true);
+    shot.md.push(format!("\n### Road surface: stop line, kerbs, wheel tracks\n\n{c}"));
 
     println!("{}", shot.md.join("\n"));
     Ok(())

@@ -70,6 +70,8 @@ fn mat_colors() -> [[u8; 3]; N_MATS] {
     c[Mat::BikeLane as usize] = [125, 88, 84];
     c[Mat::White as usize] = [240, 240, 240];
     c[Mat::Yellow as usize] = [235, 190, 40];
+    c[Mat::Kerb as usize] = [150, 148, 140];
+    c[Mat::Track as usize] = [100, 100, 106];
     c
 }
 
@@ -168,6 +170,10 @@ impl Renderer {
         for &ci in &self.cells {
             let c = &map.cells[ci];
             for sg in &map.segs[c.segs.0 as usize..c.segs.1 as usize] {
+                // Surface detail for the cameras; the BEV stays a clean plan.
+                if matches!(sg.mat, Mat::Kerb | Mat::Track) {
+                    continue;
+                }
                 let (p, q) = (v.px(sg.a), v.px(sg.b));
                 if off(&[p, q]) {
                     continue;

@@ -177,6 +177,7 @@ pub struct ProjectedActor {
 
 const NEAR: f32 = 0.1;
 const MARKING_MAX_M: f32 = 130.0;
+const TRACK_MAX_M: f32 = 60.0;
 /// Actors nearer than this get their detailed mesh (rounder wheels).
 const DETAIL_M: f64 = 35.0;
 
@@ -188,24 +189,20 @@ fn mat_colors() -> [[u8; 3]; N_MATS] {
     c[Mat::BikeLane as usize] = [120, 80, 78];
     c[Mat::White as usize] = [238, 238, 232];
     c[Mat::Yellow as usize] = [235, 190, 40];
+    c[Mat::Kerb as usize] = [196, 194, 188];
+    c[Mat::Track as usize] = [81, 81, 85];
     c
 }
 
-/// Camera pose and intrinsics in the map frame (f32).
+/// Camera pose and intrinsics in the map frame (f32): the [`Basis`] the conditions share, plus
+/// the raster size and frustum slopes only the camera needs.
 pub(crate) struct Cam {
-    pub pos: [f32; 3],
-    pub r: [f32; 3],
-    pub d: [f32; 3],
-    pub f: [f32; 3],
-    pub fx: f32,
-    pub cx: f32,
-    pub cy: f32,
+    pub b: Basis,
     pub w: usize,
     pub h: usize,
     /// tan of the half FOVs (frustum side planes), with a small margin.
     pub tx: f32,
     pub ty: f32,
-    pub far: f32,
 }
 
 impl Cam {
@@ -224,31 +221,33 @@ impl Cam {
         let h = cfg.height as usize * scale;
         let fx = (w as f64 * 0.5 / (cfg.fov_deg.to_radians() * 0.5).tan()) as f32;
         Cam {
-            pos: [mount.x as f32, mount.y as f32, cfg.mount_height_m as f32],
-            r,
-            d,
-            f,
-            fx,
-            cx: w as f32 * 0.5,
-            cy: h as f32 * 0.5,
+            b: Basis {
+                pos: [mount.x as f32, mount.y as f32, cfg.mount_height_m as f32],
+                r,
+                d,
+                f,
+                fx,
+                cx: w as f32 * 0.5,
+                cy: h as f32 * 0.5,
+                far: cfg.draw_distance_m as f32,
+            },
             w,
             h,
             tx: (w as f32 * 0.5 + 2.0) / fx,
             ty: (h as f32 * 0.5 + 2.0) / fx,
-            far: cfg.draw_distance_m as f32,
         }
     }
 
     #[inline(always)]
     pub fn to_cam(&self, p: [f32; 3]) -> [f32; 3] {
-        let q = [p[0] - self.pos[0], p[1] - self.pos[1], p[2] - self.pos[2]];
-        [dot(q, self.r), dot(q, self.d), dot(q, self.f)]
+        let q = [p[0] - self.b.pos[0], p[1] - self.b.pos[1], p[2] - self.b.pos[2]];
+        [dot(q, self.b.r), dot(q, self.b.d), dot(q, self.b.f)]
     }
 
     #[inline(always)]
     fn project(&self, c: [f32; 3]) -> SV {
         let iw = 1.0 / c[2];
-        SV { x: self.cx + self.fx * c[0] * iw, y: self.cy + self.fx * c[1] * iw, w: iw }
+        SV { x: self.b.cx + self.b.fx * c[0] * iw, y: self.b.cy + self.b.fx * c[1] * iw, w: iw }
     }
 
     /// True when all points lie outside one frustum plane.
@@ -256,7 +255,7 @@ impl Cam {
     fn outside(&self, c: &[[f32; 3]]) -> bool {
         let all = |f: &dyn Fn(&[f32; 3]) -> bool| c.iter().all(f);
         all(&|p| p[2] < NEAR)
-            || all(&|p| p[2] > self.far)
+            || all(&|p| p[2] > self.b.far)
             || all(&|p| p[0] > p[2] * self.tx)
             || all(&|p| p[0] < -p[2] * self.tx)
             || all(&|p| p[1] > p[2] * self.ty)
@@ -317,17 +316,8 @@ impl Cam {
 }
 
 impl Eye for Cam {
-    fn basis(&self) -> Basis {
-        Basis {
-            pos: self.pos,
-            r: self.r,
-            d: self.d,
-            f: self.f,
-            fx: self.fx,
-            cx: self.cx,
-            cy: self.cy,
-            far: self.far,
-        }
+    fn basis(&self) -> &Basis {
+        &self.b
     }
     fn to_cam(&self, p: [f32; 3]) -> [f32; 3] {
         Cam::to_cam(self, p)
@@ -366,8 +356,8 @@ fn may_see(cam: &Cam, map: &RenderMap, a: &ActorView) -> bool {
     let r = 0.5 * (l * l + w * w).sqrt() + 0.1;
     let p = a.pose.pos - map.origin;
     let (x, y) = (p.x as f32, p.y as f32);
-    let (dx, dy) = (x - cam.pos[0], y - cam.pos[1]);
-    if dx * dx + dy * dy > (cam.far + r) * (cam.far + r) {
+    let (dx, dy) = (x - cam.b.pos[0], y - cam.b.pos[1]);
+    if dx * dx + dy * dy > (cam.b.far + r) * (cam.b.far + r) {
         return false;
     }
     cam.sees_box([x - r, y - r, x + r, y + r], h + 0.3)
@@ -467,8 +457,8 @@ impl Renderer {
 
         // Cells in the draw-distance square, frustum-tested.
         self.cells.clear();
-        let r = cam.far;
-        map.for_cells([cam.pos[0] - r, cam.pos[1] - r], [cam.pos[0] + r, cam.pos[1] + r], |i, c| {
+        let r = cam.b.far;
+        map.for_cells([cam.b.pos[0] - r, cam.b.pos[1] - r], [cam.b.pos[0] + r, cam.b.pos[1] + r], |i, c| {
             if cam.sees_box(c.bb, c.zmax) {
                 self.cells.push(i);
             }
@@ -477,7 +467,7 @@ impl Renderer {
         if !look.is_noon_clear() {
             for (i, c) in cols.iter_mut().enumerate() {
                 *c = look.lit(*c);
-                if i == Mat::Road as usize || i == Mat::Junction as usize {
+                if i == Mat::Road as usize || i == Mat::Junction as usize || i == Mat::Track as usize {
                     *c = c.map(|v| (v as f32 * look.road) as u8);
                 }
             }
@@ -496,7 +486,7 @@ impl Renderer {
                         (gt.p[0][0] + gt.p[1][0] + gt.p[2][0]) / 3.0,
                         (gt.p[0][1] + gt.p[1][1] + gt.p[2][1]) / 3.0,
                     ];
-                    let d = ((cxy[0] - cam.pos[0]).powi(2) + (cxy[1] - cam.pos[1]).powi(2)).sqrt();
+                    let d = ((cxy[0] - cam.b.pos[0]).powi(2) + (cxy[1] - cam.b.pos[1]).powi(2)).sqrt();
                     let col = fogged(cols[gt.mat as usize], look.fog_k(d), look.fog);
                     let n = cam.clip_project(p, &mut poly);
                     b.fill_convex(&poly[..n], col);
@@ -504,7 +494,7 @@ impl Renderer {
             }
         }
         // Markings: quads around their centre line, at least ~1.3 px wide.
-        let min_px = 1.3 / cam.fx;
+        let min_px = 1.3 / cam.b.fx;
         for &off in &self.cells {
             let c = &map.cells[off];
             for sg in &map.segs[c.segs.0 as usize..c.segs.1 as usize] {
@@ -513,16 +503,20 @@ impl Renderer {
                 if len <= 0.0 {
                     continue;
                 }
-                let mid = [(sg.a[0] + sg.b[0]) * 0.5 - cam.pos[0], (sg.a[1] + sg.b[1]) * 0.5 - cam.pos[1]];
+                let mid =
+                    [(sg.a[0] + sg.b[0]) * 0.5 - cam.b.pos[0], (sg.a[1] + sg.b[1]) * 0.5 - cam.b.pos[1]];
                 let d = (mid[0] * mid[0] + mid[1] * mid[1]).sqrt();
                 // Far markings shrink below a pixel and turn into speckle: widen them up to
                 // 60 m, drop them past MARKING_MAX_M.
-                if d > MARKING_MAX_M {
+                if d > MARKING_MAX_M || (sg.mat == Mat::Track && d > TRACK_MAX_M) {
                     continue;
                 }
+                // Wheel tracks are texture, not paint: never widened, so they fade out with
+                // distance instead of turning into lines.
+                let min_px = if sg.mat == Mat::Track { 0.0 } else { min_px };
                 // Width from each end's own distance, so joined pieces share their end edges.
                 let hw_at = |p: [f32; 2]| {
-                    let dd = ((p[0] - cam.pos[0]).powi(2) + (p[1] - cam.pos[1]).powi(2)).sqrt();
+                    let dd = ((p[0] - cam.b.pos[0]).powi(2) + (p[1] - cam.b.pos[1]).powi(2)).sqrt();
                     sg.hw.max(dd.min(60.0) * min_px * 0.5)
                 };
                 let (ha, hb) = (hw_at(sg.a), hw_at(sg.b));
@@ -537,6 +531,13 @@ impl Renderer {
                     continue;
                 }
                 let col = fogged(cols[sg.mat as usize], look.fog_k(d), look.fog);
+                // In front of the near plane: one quad with anti-aliased long sides (edges 0
+                // and 2); the ends stay hard so consecutive pieces join without a seam.
+                if q.iter().all(|p| p[2] >= NEAR) {
+                    let quad = q.map(|p| cam.project(p));
+                    b.fill_convex_aa(&quad, col, 0b0101);
+                    continue;
+                }
                 for tri in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
                     let n = cam.clip_project(tri, &mut poly);
                     b.fill_convex(&poly[..n], col);
@@ -568,7 +569,7 @@ impl Renderer {
         dynamic.clear();
         dynamic_tris(cam, map, frame, cfg.draw_ego, look.night, &mut dynamic);
         if look.night {
-            conditions::street_lamp_tris(&cam.basis(), map, &mut dynamic);
+            conditions::street_lamp_tris(cam.basis(), map, &mut dynamic);
         }
         for &off in &self.cells {
             let c = &map.cells[off];
@@ -581,8 +582,7 @@ impl Renderer {
         }
         self.tris = dynamic;
         if look.wet || look.haze_m.is_some() {
-            let basis = cam.basis();
-            b.post(&mut |rgb, depth, w, h| conditions::post(&look, &basis, rgb, depth, w, h));
+            b.post(&mut |rgb, depth, w, h| conditions::post(&look, &cam.b, rgb, depth, w, h));
         }
     }
 
@@ -875,7 +875,7 @@ fn area_inside(t: &[SV; 3], w: f32, h: f32) -> f64 {
 fn draw_tri3<B: RasterBackend>(cam: &Cam, b: &mut B, tr: &Tri3, poly: &mut [SV; 4], look: &Look) {
     let p0 = tr.p[0];
     if !tr.two_sided {
-        let v = [p0[0] - cam.pos[0], p0[1] - cam.pos[1], p0[2] - cam.pos[2]];
+        let v = [p0[0] - cam.b.pos[0], p0[1] - cam.b.pos[1], p0[2] - cam.b.pos[2]];
         if dot(v, tr.n) >= 0.0 {
             return;
         }
@@ -887,7 +887,7 @@ fn draw_tri3<B: RasterBackend>(cam: &Cam, b: &mut B, tr: &Tri3, poly: &mut [SV; 
     let col = if tr.emissive {
         tr.col
     } else {
-        let d = ((p0[0] - cam.pos[0]).powi(2) + (p0[1] - cam.pos[1]).powi(2)).sqrt();
+        let d = ((p0[0] - cam.b.pos[0]).powi(2) + (p0[1] - cam.b.pos[1]).powi(2)).sqrt();
         fogged(look.lit(tr.col), look.fog_k(d), look.fog)
     };
     let n = cam.clip_project(c, poly);
@@ -900,14 +900,14 @@ fn background<B: RasterBackend>(cam: &Cam, look: &Look, b: &mut B) {
     let (sky_top, horizon, grass) = (look.sky_top, look.horizon, look.grass.map(|v| v as u8));
     let (fog0, fog1, fog_on) = (look.fog0, look.fog1, look.fog_max > 0.0);
     b.fill_rows(&|y| {
-        let yc = (y as f32 + 0.5 - cam.cy) / cam.fx;
-        let dir = [cam.d[0] * yc + cam.f[0], cam.d[1] * yc + cam.f[1], cam.d[2] * yc + cam.f[2]];
+        let yc = (y as f32 + 0.5 - cam.b.cy) / cam.b.fx;
+        let dir = [cam.b.d[0] * yc + cam.b.f[0], cam.b.d[1] * yc + cam.b.f[1], cam.b.d[2] * yc + cam.b.f[2]];
         let horiz = (dir[0] * dir[0] + dir[1] * dir[1]).sqrt();
         if dir[2] >= 0.0 {
             let elev = dir[2] / horiz.max(1e-6);
             lerp3(horizon, sky_top, (elev * 2.5).min(1.0))
         } else if fog_on {
-            let dist = cam.pos[2] / -dir[2] * horiz;
+            let dist = cam.b.pos[2] / -dir[2] * horiz;
             fogged(grass, ((dist - fog0) / (fog1 * 1.6 - fog0)).clamp(0.0, 1.0), horizon)
         } else {
             grass

@@ -16,8 +16,8 @@ use crate::conditions::{Conditions, TimeOfDay, Weather};
 use crate::view::{ActorKind, ActorView};
 use serde::{Deserialize, Serialize};
 
-/// A camera's pose and intrinsics as the conditions need them (the camera module implements
-/// [`Eye`]; this module does not depend on it).
+/// A camera's pose and intrinsics as the conditions need them (the camera's `Cam` holds one and
+/// implements [`Eye`]; this module does not depend on it).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Basis {
     pub pos: [f32; 3],
@@ -32,7 +32,7 @@ pub(crate) struct Basis {
 
 /// What the conditions draw through: a pinhole camera without roll.
 pub(crate) trait Eye {
-    fn basis(&self) -> Basis;
+    fn basis(&self) -> &Basis;
     fn to_cam(&self, p: [f32; 3]) -> [f32; 3];
     /// True when all points lie outside one frustum plane.
     fn outside(&self, c: &[[f32; 3]]) -> bool;
@@ -249,7 +249,7 @@ fn ground_light<B: RasterBackend, F: Fn(&mut [u8], [f32; 2], [f32; 2])>(
         let n = eye.clip_project(tri, poly);
         b.light_convex(&poly[..n], &mut |y, x0, row| {
             let yc = (y as f32 + 0.5 - cy) / fx;
-            let d0 = ray(&cam, (x0 as f32 + 0.5 - cx) / fx, yc);
+            let d0 = ray(cam, (x0 as f32 + 0.5 - cx) / fx, yc);
             if d0[2] >= -1e-4 {
                 return;
             }

@@ -18,8 +18,12 @@ pub(crate) enum Mat {
     BikeLane = 3,
     White = 4,
     Yellow = 5,
+    /// The kerb's top along a road's outer edge (cameras only).
+    Kerb = 6,
+    /// Darker, polished wheel tracks in a lane: the asphalt's texture (cameras only, near).
+    Track = 7,
 }
-pub(crate) const N_MATS: usize = 6;
+pub(crate) const N_MATS: usize = 8;
 
 /// Draw layers of area triangles, bottom first.
 pub(crate) const N_LAYERS: usize = 3;
@@ -428,6 +432,9 @@ impl Collect {
 
 /// Line half widths (metres): lane lines are 0.15 m wide in reality, drawn a bit wider to read.
 const LINE_HW: f64 = 0.1;
+/// Kerb top (0.25 m) and wheel track (0.6 m) half widths.
+const KERB_HW: f64 = 0.125;
+const TRACK_HW: f64 = 0.3;
 
 impl RenderMap {
     /// Precomputes the render geometry of a network (once per map; ~linear in its size).
@@ -540,6 +547,38 @@ impl RenderMap {
                 .filter_map(lane_of)
                 .filter(|l| is_vehicle_lane(l) && l.shape.len() >= 2)
                 .collect();
+            // Wheel tracks: where tyres run, asphalt is darker; drawn under the lines.
+            for l in vl.iter().filter(|l| !is_bike_only(l) && l.width_m >= 2.5) {
+                let pts = l.shape.points();
+                for side in [-1.0, 1.0] {
+                    c.solid(origin, &offset_polyline(pts, side * 0.85), TRACK_HW, Mat::Track);
+                }
+            }
+            // Kerbs just outside the outermost lanes: on the right always, on the left when
+            // no opposite edge shares the road (one-way roads and divided carriageways).
+            let paved: Vec<&Lane> = e
+                .lanes
+                .iter()
+                .filter_map(lane_of)
+                .filter(|l| !is_sidewalk(l) && l.shape.len() >= 2)
+                .collect();
+            if let (Some(r), Some(l)) = (paved.first(), paved.last()) {
+                c.solid(
+                    origin,
+                    &offset_polyline(r.shape.points(), -(r.width_m * 0.5 + KERB_HW)),
+                    KERB_HW,
+                    Mat::Kerb,
+                );
+                let two_way = matches!((e.from, e.to), (Some(a), Some(b)) if pair.contains_key(&(b, a)));
+                if !two_way {
+                    c.solid(
+                        origin,
+                        &offset_polyline(l.shape.points(), l.width_m * 0.5 + KERB_HW),
+                        KERB_HW,
+                        Mat::Kerb,
+                    );
+                }
+            }
             for (k, l) in vl.iter().enumerate() {
                 let pts = l.shape.points();
                 let hw = l.width_m * 0.5;

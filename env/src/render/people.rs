@@ -84,8 +84,24 @@ impl Body {
     }
 }
 
-/// A walking or standing pedestrian facing +forward of `fr`.
+/// One adult pedestrian in [`WHEELCHAIR_ONE_IN`] (by a hash of the actor id, so the same
+/// person always is) is drawn as a wheelchair user. The world has no wheelchair class; this only
+/// changes the picture, never the footprint or the motion.
+pub(crate) const WHEELCHAIR_ONE_IN: u64 = 16;
+
+/// Whether the pedestrian `a` of height `h` is drawn in a wheelchair.
+pub(crate) fn in_wheelchair(a: &ActorView, h: f32) -> bool {
+    let mut x = u64::from(a.id).wrapping_add(0x9E37_79B9_7F4A_7C15);
+    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    h >= 1.5 && (x ^ (x >> 31)) % WHEELCHAIR_ONE_IN == 0
+}
+
+/// A walking or standing pedestrian facing +forward of `fr` (or a wheelchair user).
 pub(crate) fn pedestrian(m: &mut Mesh, fr: &Frame, a: &ActorView, h: f32) {
+    if in_wheelchair(a, h) {
+        return wheelchair(m, fr, a, h);
+    }
     let b = Body::new(h);
     let s = b.s;
     let look = Look::of(a);
@@ -153,6 +169,61 @@ fn torso_and_head(m: &mut Mesh, fr: &Frame, b: &Body, dz: f32, lean: f32, look: 
     m.bx(
         fr,
         lean,
+        0.0,
+        hz,
+        hz + 2.0 * hr,
+        hr * 0.92,
+        hr * 0.85,
+        &[look.skin, look.hair, look.skin, look.skin, look.hair, look.skin],
+    );
+}
+
+/// A person seated in a manual wheelchair facing +forward of `fr`: two large rear wheels with
+/// push rims, small front casters, seat, backrest and footrest; hands on the rims.
+fn wheelchair(m: &mut Mesh, fr: &Frame, a: &ActorView, h: f32) {
+    const CHAIR: [u8; 3] = [55, 58, 66];
+    const TYRE: [u8; 3] = [25, 25, 27];
+    let (r, track) = (0.30f32, 0.30f32);
+    for side in [1.0f32, -1.0] {
+        m.wheel(fr, -0.08, side * track, r, 0.02, 14, side, TYRE, [170, 172, 178]);
+        m.wheel(fr, 0.30, side * 0.2, 0.07, 0.02, 6, side, TYRE, CHAIR);
+        // Side frame: from the caster fork up to the seat rail and back to the push handle.
+        m.strut(fr, [0.30, side * 0.22, 0.12], [0.26, side * 0.22, 0.50], 0.015, 0.015, CHAIR);
+        m.strut(fr, [0.26, side * 0.22, 0.50], [-0.14, side * 0.22, 0.50], 0.015, 0.015, CHAIR);
+        m.strut(fr, [-0.14, side * 0.22, 0.50], [-0.20, side * 0.22, 0.98], 0.015, 0.015, CHAIR);
+    }
+    m.bx(fr, 0.06, 0.0, 0.48, 0.52, 0.21, 0.22, &all(CHAIR));
+    m.bx(fr, -0.18, 0.0, 0.52, 0.95, 0.02, 0.2, &all(CHAIR));
+    m.bx(fr, 0.40, 0.0, 0.10, 0.13, 0.07, 0.16, &all(CHAIR));
+
+    let b = Body::new(h);
+    let s = b.s;
+    let look = Look::of(a);
+    let hip = [-0.06, 0.62];
+    for side in [1.0f32, -1.0] {
+        let y = side * 0.1 * s;
+        let knee = [0.30, 0.60];
+        let foot = [0.38, 0.16];
+        let leg = 0.068 * s;
+        m.strut(fr, [hip[0], y, hip[1]], [knee[0], y, knee[1]], leg, leg, look.trousers);
+        m.strut(fr, [knee[0], y, knee[1]], [foot[0], y, foot[1]], leg * 0.85, leg * 0.85, look.trousers);
+        m.bx(fr, foot[0] + 0.04, y, 0.13, 0.20, 0.11 * s, 0.055 * s, &all(SHOE));
+    }
+    let torso = (b.shoulder_z - b.hip_z).max(0.3);
+    let shoulder = [hip[0] + 0.04, hip[1] + torso];
+    m.strut(fr, [hip[0], 0.0, hip[1]], [shoulder[0], 0.0, shoulder[1]], 0.11 * s, 0.19 * s, look.shirt);
+    for side in [1.0f32, -1.0] {
+        let sh = [shoulder[0], side * 0.2 * s, shoulder[1] - 0.04];
+        let hand = [0.0, side * (track - 0.03), 0.55];
+        m.strut(fr, sh, hand, 0.045 * s, 0.045 * s, look.shirt);
+        m.bx(fr, hand[0], hand[1], hand[2] - 0.04, hand[2] + 0.03, 0.04, 0.03, &all(look.skin));
+    }
+    let hr = b.head;
+    let hz = shoulder[1] + 0.05 * s;
+    m.bx(fr, shoulder[0], 0.0, shoulder[1], hz, 0.04 * s, 0.04 * s, &all(look.skin));
+    m.bx(
+        fr,
+        shoulder[0],
         0.0,
         hz,
         hz + 2.0 * hr,
@@ -234,6 +305,28 @@ pub(crate) fn cyclist(m: &mut Mesh, fr: &Frame, a: &ActorView, l: f32, h: f32) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn wheelchair_users_are_a_fixed_share_of_adults_by_id() {
+        let view = |id: u32| ActorView {
+            id,
+            kind: crate::view::ActorKind::Pedestrian,
+            pose: crate::geom::Pose::new(Vec2::ZERO, 0.0),
+            speed_mps: 0.0,
+            length_m: 0.0,
+            width_m: 0.0,
+            height_m: 0.0,
+            color: [200, 30, 30],
+            braking: false,
+            blinkers: 0,
+        };
+        let n = (0..4000).filter(|&i| in_wheelchair(&view(i), 1.75)).count();
+        let want = 4000 / WHEELCHAIR_ONE_IN as usize;
+        assert!(n.abs_diff(want) < want / 4, "{n} of 4000 in a wheelchair, want about {want}");
+        // Children never; the same id always gives the same answer.
+        assert!((0..4000).all(|i| !in_wheelchair(&view(i), 1.2)));
+        assert!((0..4000).all(|i| in_wheelchair(&view(i), 1.75) == in_wheelchair(&view(i), 1.75)));
+    }
 
     #[test]
     fn knee_keeps_bone_lengths() {

@@ -12,6 +12,7 @@ mod module_cycles;
 mod render_conditions;
 mod render_golden;
 mod render_semantic;
+mod render_surface;
 mod scenario_errors;
 mod scenario_features;
 mod scenario_hazards;
