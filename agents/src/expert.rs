@@ -1593,27 +1593,26 @@ impl Expert {
             // > 0: the detour passes on the left.
             let side = self.detour.map_or(0.0, |d| d.offset.signum());
             let meta = &mut self.meta;
+            // Mean distance of a path action's path from the pursued one (weighted as above).
             let mut cost = |p: PathAction| {
-                meta.resolve_path(world.map(), route, &ego.pose, v, p, reach + 10.0).map_or(
-                    f64::INFINITY,
-                    |line| {
-                        samples
-                            .iter()
-                            .map(|&q| {
-                                line.project(q).map_or(f64::INFINITY, |pr| {
-                                    // `q` right of the line (lateral < 0): the line lies left of it.
-                                    let beyond = -pr.lateral * side > 0.0;
-                                    if beyond {
-                                        META_BEYOND_WEIGHT * pr.distance
-                                    } else {
-                                        pr.distance
-                                    }
-                                })
-                            })
-                            .sum::<f64>()
-                            / samples.len() as f64
-                    },
-                )
+                let Some(line) = meta.resolve_path(world.map(), route, &ego.pose, v, p, reach + 10.0) else {
+                    return f64::INFINITY;
+                };
+                samples
+                    .iter()
+                    .map(|&q| {
+                        line.project(q).map_or(f64::INFINITY, |pr| {
+                            // `q` right of the line (lateral < 0): the line lies left of it.
+                            let beyond = -pr.lateral * side > 0.0;
+                            if beyond {
+                                META_BEYOND_WEIGHT * pr.distance
+                            } else {
+                                pr.distance
+                            }
+                        })
+                    })
+                    .sum::<f64>()
+                    / samples.len() as f64
             };
             let follow = cost(PathAction::FollowLane);
             let mut best = (follow, PathAction::FollowLane);
@@ -1624,11 +1623,13 @@ impl Expert {
                 }
             }
             path = best.1;
+            let mean = best.0;
             // During a detour no path action passes where the expert would (the pass uses space
             // beside the lane that the lane graph has no lane for): it stands rather than drive
-            // into the obstacle. Elsewhere the nearest path is driven (a stand would only wait
-            // for a path that the lane graph will not offer).
-            if side != 0.0 && best.0.is_finite() && best.0 > META_PATH_MISMATCH_M {
+            // into the obstacle. Elsewhere the nearest path is driven (a route's lane change or a
+            // ramp merge only shifts over sooner or later than the expert would; a stand would
+            // wait for a path the lane graph will not offer).
+            if side != 0.0 && mean.is_finite() && mean > META_PATH_MISMATCH_M {
                 speed = SpeedAction::Stop;
             }
         }

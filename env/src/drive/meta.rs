@@ -108,6 +108,8 @@ const LANE_MAX_RAD: f64 = 1.2;
 const ON_ROUTE_M: f64 = 1.5;
 /// Added to a candidate lane's cost (m) when it leaves the route within 5 m.
 const OFF_ROUTE_COST_M: f64 = 2.0;
+/// A resolved path runs this far past the length asked for, m.
+const PATH_MARGIN_M: f64 = 5.0;
 /// Safety bound on lanes walked for one path.
 const MAX_LANES: usize = 32;
 
@@ -348,13 +350,20 @@ fn walk(
     out
 }
 
-fn lanes_path(net: &Network, lanes: &[LaneIdx], s0: f64) -> Polyline {
+/// The centreline of `lanes` from `s0` on the first, cut [`PATH_MARGIN_M`] past `length_m`
+/// (the rest of a long lane would only be copied and searched for nothing).
+fn lanes_path(net: &Network, lanes: &[LaneIdx], s0: f64, length_m: f64) -> Polyline {
     let mut pts: Vec<Vec2> = Vec::new();
+    let mut left = length_m + PATH_MARGIN_M;
     for (i, &l) in lanes.iter().enumerate() {
+        if left <= 0.0 {
+            break;
+        }
         let shape = &net.lanes[l].shape;
-        let part =
-            if i == 0 { shape.slice(s0.clamp(0.0, shape.length()), shape.length()) } else { shape.clone() };
-        for &p in part.points() {
+        let a = if i == 0 { s0.clamp(0.0, shape.length()) } else { 0.0 };
+        let b = (a + left).min(shape.length());
+        left -= b - a;
+        for &p in shape.slice(a, b).points() {
             if pts.last().is_none_or(|q: &Vec2| q.dist(p) > 1e-3) {
                 pts.push(p);
             }
@@ -406,10 +415,15 @@ fn resolve_from(
     };
     let path = match change {
         Some(side) => {
-            let own = lanes_path(net, &walk(net, lane, s, length_m, PathAction::FollowLane, on_route), s);
+            let own =
+                lanes_path(net, &walk(net, lane, s, length_m, PathAction::FollowLane, on_route), s, length_m);
             let s_side = net.lanes[side].shape.project(ego.pos).map_or(0.0, |p| p.s);
-            let other =
-                lanes_path(net, &walk(net, side, s_side, length_m, PathAction::FollowLane, on_route), s_side);
+            let other = lanes_path(
+                net,
+                &walk(net, side, s_side, length_m, PathAction::FollowLane, on_route),
+                s_side,
+                length_m,
+            );
             let v = if speed_mps.is_finite() { speed_mps.max(0.0) } else { 0.0 };
             let ramp = (LANE_CHANGE_S * v).max(LANE_CHANGE_MIN_M);
             // The ramp starts where the ego is, not on its lane's centre: a change asked again
@@ -426,7 +440,7 @@ fn resolve_from(
                 .collect();
             Polyline::new(pts)
         }
-        None => lanes_path(net, &walk(net, lane, s, length_m, action, on_route), s),
+        None => lanes_path(net, &walk(net, lane, s, length_m, action, on_route), s, length_m),
     };
     if path.len() < 2 || path.length() <= 0.0 {
         return None;
