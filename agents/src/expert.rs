@@ -374,6 +374,8 @@ pub struct Expert {
     /// The bicycle poses are predicted with ([`step_bicycle`], the world's own model): the
     /// world's ego when given ([`Expert::set_vehicle`]), else `params`' steering geometry.
     bicycle: VehicleParams,
+    /// The meta level's lane-graph resolution (the env's own, with its memo for the route).
+    meta: dh_env::drive::meta::MetaResolver,
 }
 
 /// Route point at arc `s`, extrapolated along the end headings beyond the ends.
@@ -472,6 +474,7 @@ impl Expert {
             stationary: Vec::new(),
             envelope: Vec::new(),
             envelope_s0: 0.0,
+            meta: dh_env::drive::meta::MetaResolver::new(),
         })
     }
 
@@ -487,6 +490,7 @@ impl Expert {
         self.detour = None;
         self.stationary.clear();
         self.envelope.clear();
+        self.meta.reset();
     }
 
     /// One decision. Never panics; degenerate input (empty route, non-finite ego state) yields
@@ -1560,9 +1564,10 @@ impl Expert {
 
     /// The meta-action closest to the decision: the speed action from the target against the
     /// ego speed, and the path action whose lane-graph path (as the env resolves it) lies
-    /// nearest to the pursued path (FOLLOW_LANE on near ties).
+    /// nearest to the pursued path (FOLLOW_LANE on near ties). During a detour around a standing
+    /// obstacle a path beyond the pursued one on the passing side (a whole lane over where the
+    /// expert would shift less) counts a quarter of its distance: it passes as well.
     pub fn meta_in_world(&mut self, world: &World, route: &Polyline) -> MetaAction {
-        use dh_env::drive::meta::resolve_path;
         self.sync_steer(world);
         let a = self.act_in_world(world, route);
         let ego = world.ego();
@@ -1585,17 +1590,29 @@ impl Expert {
         if self.s_hint.is_some() && ego.pose.pos.is_finite() {
             let own = self.pursued_path(route, reach);
             let samples: Vec<Vec2> = (1..=META_SAMPLES).map(|i| own.point_at(step * i as f64)).collect();
-            let cost = |p: PathAction| {
-                resolve_path(world.map(), route, &ego.pose, v, p, reach + 10.0).map_or(
-                    f64::INFINITY,
-                    |line| {
-                        samples
-                            .iter()
-                            .map(|&q| line.project(q).map_or(f64::INFINITY, |pr| pr.distance))
-                            .sum::<f64>()
-                            / samples.len() as f64
-                    },
-                )
+            // > 0: the detour passes on the left.
+            let side = self.detour.map_or(0.0, |d| d.offset.signum());
+            let meta = &mut self.meta;
+            // Mean distance of a path action's path from the pursued one (weighted as above).
+            let mut cost = |p: PathAction| {
+                let Some(line) = meta.resolve_path(world.map(), route, &ego.pose, v, p, reach + 10.0) else {
+                    return f64::INFINITY;
+                };
+                samples
+                    .iter()
+                    .map(|&q| {
+                        line.project(q).map_or(f64::INFINITY, |pr| {
+                            // `q` right of the line (lateral < 0): the line lies left of it.
+                            let beyond = -pr.lateral * side > 0.0;
+                            if beyond {
+                                META_BEYOND_WEIGHT * pr.distance
+                            } else {
+                                pr.distance
+                            }
+                        })
+                    })
+                    .sum::<f64>()
+                    / samples.len() as f64
             };
             let follow = cost(PathAction::FollowLane);
             let mut best = (follow, PathAction::FollowLane);
@@ -1606,9 +1623,13 @@ impl Expert {
                 }
             }
             path = best.1;
-            // No path action goes where the expert would (a pass the lane graph has no lane for):
-            // it stands rather than drive a path it did not plan its speed for.
-            if best.0.is_finite() && best.0 > META_PATH_MISMATCH_M {
+            let mean = best.0;
+            // During a detour no path action passes where the expert would (the pass uses space
+            // beside the lane that the lane graph has no lane for): it stands rather than drive
+            // into the obstacle. Elsewhere the nearest path is driven (a route's lane change or a
+            // ramp merge only shifts over sooner or later than the expert would; a stand would
+            // wait for a path the lane graph will not offer).
+            if side != 0.0 && mean.is_finite() && mean > META_PATH_MISMATCH_M {
                 speed = SpeedAction::Stop;
             }
         }
@@ -1626,3 +1647,5 @@ const META_KEEP_BAND_MPS: f64 = 0.5;
 const META_PATH_TIE_M: f64 = 0.3;
 /// A path action whose path strays from the expert's by more than this (mean, m) is no match.
 const META_PATH_MISMATCH_M: f64 = 1.0;
+/// Weight of a path's distance beyond the expert's on a detour's passing side.
+const META_BEYOND_WEIGHT: f64 = 0.25;

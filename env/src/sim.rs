@@ -10,7 +10,7 @@
 //! a reply without a usable decision, or no reply at all, holds the previous control verbatim
 //! and counts as a parse failure (docs/protocol.md#r4-actuation). Every decision is logged (`decision_log`).
 
-use crate::drive::meta::meta_waypoints;
+use crate::drive::meta::MetaResolver;
 use crate::drive::prompt_levels::{meta_prompt, waypoint_prompt};
 use crate::drive::tracker::{DEFAULT_WAYPOINTS, DEFAULT_WAYPOINT_DT_S};
 use crate::drive::{
@@ -363,6 +363,8 @@ struct Episode {
     bridge: ActuationBridge,
     /// Plan levels: the waypoint tracker and the replies without a usable plan.
     tracker: WaypointTracker,
+    /// Meta level: the lane-graph resolution's memo for this episode's route.
+    meta: MetaResolver,
     plan_failures: u64,
     score: ScoreTracker,
     seed: u64,
@@ -469,6 +471,7 @@ impl Sim {
             world,
             bridge: ActuationBridge::new(),
             tracker: WaypointTracker::new(TrackerGains::default()),
+            meta: MetaResolver::new(),
             plan_failures: 0,
             score,
             seed,
@@ -550,7 +553,7 @@ impl Sim {
                     let (n, dt) = (self.config.waypoints as usize, self.config.waypoint_dt_s);
                     let pts = match p {
                         Plan::Waypoints(pts) => pts.clone(),
-                        Plan::Meta(m) => meta_waypoints(
+                        Plan::Meta(m) => ep.meta.waypoints(
                             ep.world.map(),
                             self.tracker.route(),
                             &ego.pose,

@@ -108,6 +108,8 @@ const LANE_MAX_RAD: f64 = 1.2;
 const ON_ROUTE_M: f64 = 1.5;
 /// Added to a candidate lane's cost (m) when it leaves the route within 5 m.
 const OFF_ROUTE_COST_M: f64 = 2.0;
+/// A resolved path runs this far past the length asked for, m.
+const PATH_MARGIN_M: f64 = 5.0;
 /// Safety bound on lanes walked for one path.
 const MAX_LANES: usize = 32;
 
@@ -141,6 +143,14 @@ pub fn speed_profile(speed: SpeedAction, v: f64, n: usize, dt: f64) -> Vec<f64> 
 /// lanes), the one nearest in offset and heading; where lanes overlap (a junction's), one that
 /// goes on along the route wins over one that leaves it ([`OFF_ROUTE_COST_M`]).
 pub fn ego_lane(net: &Network, route: &Polyline, ego: &Pose) -> Option<(LaneIdx, f64)> {
+    MetaResolver::new().ego_lane(net, route, ego)
+}
+
+fn ego_lane_with(
+    net: &Network,
+    ego: &Pose,
+    near_route: &mut dyn FnMut(Vec2) -> bool,
+) -> Option<(LaneIdx, f64)> {
     let mut lanes: SmallVec<[LaneIdx; 8]> = SmallVec::new();
     net.drivable().lanes_at(ego.pos, &mut lanes);
     if let Some(j) = net.drivable().junction_at(ego.pos) {
@@ -156,7 +166,7 @@ pub fn ego_lane(net: &Network, route: &Polyline, ego: &Pose) -> Option<(LaneIdx,
         let Some(pr) = shape.project(ego.pos) else { continue };
         let dh = wrap_angle(shape.heading_at(pr.s) - ego.yaw).abs();
         let ahead = shape.point_at((pr.s + 5.0).min(shape.length()));
-        let on = route.project(ahead).is_some_and(|p| p.distance <= ON_ROUTE_M);
+        let on = near_route(ahead);
         let cost = pr.distance + 4.0 * dh + if on { 0.0 } else { OFF_ROUTE_COST_M };
         if pr.distance <= LANE_MAX_OFFSET_M && dh <= LANE_MAX_RAD && best.is_none_or(|b| cost < b.0) {
             best = Some((cost, l, pr.s));
@@ -170,10 +180,122 @@ pub fn ego_lane(net: &Network, route: &Polyline, ego: &Pose) -> Option<(LaneIdx,
     best.map(|b| (b.1, b.2))
 }
 
-fn on_route(net: &Network, route: &Polyline, lane: LaneIdx) -> bool {
+fn lane_on_route(net: &Network, route: &Polyline, lane: LaneIdx) -> bool {
     let shape = &net.lanes[lane].shape;
     let probe = shape.point_at(shape.length().min(3.0));
     route.project(probe).is_some_and(|p| p.distance <= ON_ROUTE_M)
+}
+
+/// Resolves meta-actions for one episode's route, remembering what does not change between
+/// decisions (docs/r4.md#action-levels): whether each lane lies on the route (a pure function of
+/// the lane and the route, computed once per lane), and the ego's progress along the route, so
+/// that the route is searched only near the ego ([`ROUTE_WINDOW_BACK_M`], [`ROUTE_WINDOW_AHEAD_M`])
+/// instead of along its whole length at every decision. Its state is a function of the decisions
+/// so far: same seed and actions, same plans.
+#[derive(Debug, Clone, Default)]
+pub struct MetaResolver {
+    /// Per lane: 0 not yet known, 1 off the route, 2 on it.
+    on_route: Vec<u8>,
+    /// Route progress at the last resolution, m.
+    s_hint: Option<f64>,
+    /// (points, length) of the route the memo belongs to.
+    route_key: Option<(usize, u64)>,
+}
+
+/// The route is searched from this far behind the last progress to this far ahead of it, m.
+const ROUTE_WINDOW_BACK_M: f64 = 30.0;
+const ROUTE_WINDOW_AHEAD_M: f64 = 120.0;
+/// Farther than this from the route in its window, the ego's progress is searched anew, m.
+const ROUTE_LOST_M: f64 = 10.0;
+
+impl MetaResolver {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Forgets the route (a new episode).
+    pub fn reset(&mut self) {
+        *self = Self::default();
+    }
+
+    fn sync(&mut self, net: &Network, route: &Polyline, ego: &Pose) {
+        let key = (route.len(), route.length().to_bits());
+        if self.route_key != Some(key) || self.on_route.len() != net.lanes.len() {
+            self.on_route = vec![0; net.lanes.len()];
+            self.s_hint = None;
+            self.route_key = Some(key);
+        }
+        let windowed = self.s_hint.and_then(|h| {
+            route
+                .project_within(ego.pos, h - ROUTE_WINDOW_BACK_M, h + ROUTE_WINDOW_AHEAD_M)
+                .filter(|p| p.distance <= ROUTE_LOST_M)
+        });
+        self.s_hint = windowed.or_else(|| route.project(ego.pos)).map(|p| p.s);
+    }
+
+    fn near_route(&self, route: &Polyline, p: Vec2) -> bool {
+        let pr = match self.s_hint {
+            Some(h) => route.project_within(p, h - ROUTE_WINDOW_BACK_M, h + ROUTE_WINDOW_AHEAD_M),
+            None => route.project(p),
+        };
+        pr.is_some_and(|p| p.distance <= ON_ROUTE_M)
+    }
+
+    fn on_route(&mut self, net: &Network, route: &Polyline, lane: LaneIdx) -> bool {
+        match self.on_route.get(lane) {
+            Some(1) => false,
+            Some(2) => true,
+            _ => {
+                let on = lane_on_route(net, route, lane);
+                if let Some(m) = self.on_route.get_mut(lane) {
+                    *m = if on { 2 } else { 1 };
+                }
+                on
+            }
+        }
+    }
+
+    /// [`ego_lane`] with the memo.
+    pub fn ego_lane(&mut self, net: &Network, route: &Polyline, ego: &Pose) -> Option<(LaneIdx, f64)> {
+        self.sync(net, route, ego);
+        let me = &*self;
+        ego_lane_with(net, ego, &mut |p| me.near_route(route, p))
+    }
+
+    /// [`resolve_path`] with the memo.
+    pub fn resolve_path(
+        &mut self,
+        net: &Network,
+        route: &Polyline,
+        ego: &Pose,
+        speed_mps: f64,
+        action: PathAction,
+        length_m: f64,
+    ) -> Option<Polyline> {
+        let (lane, s) = self.ego_lane(net, route, ego)?;
+        let mut on = |l: LaneIdx| self.on_route(net, route, l);
+        resolve_from(net, ego, lane, s, speed_mps, action, length_m, &mut on)
+    }
+
+    /// [`meta_waypoints`] with the memo.
+    #[allow(clippy::too_many_arguments)]
+    pub fn waypoints(
+        &mut self,
+        net: &Network,
+        route: &Polyline,
+        ego: &Pose,
+        speed_mps: f64,
+        action: MetaAction,
+        n: usize,
+        dt: f64,
+    ) -> Vec<(f64, f64)> {
+        let dist = speed_profile(action.speed, speed_mps, n, dt);
+        let far = dist.last().copied().unwrap_or(0.0) + 10.0;
+        match self.resolve_path(net, route, ego, speed_mps, action.path, far) {
+            Some(path) => super::tracker::waypoints_along(&path, ego, &dist),
+            None => dist.iter().map(|&d| (d, 0.0)).collect(),
+        }
+    }
 }
 
 fn dir_matches(action: PathAction, dir: TurnDir) -> bool {
@@ -190,11 +312,11 @@ fn dir_matches(action: PathAction, dir: TurnDir) -> bool {
 /// where `turn` (a GO_STRAIGHT / TURN_* action) picks the direction when it can.
 fn walk(
     net: &Network,
-    route: &Polyline,
     lane: LaneIdx,
     s0: f64,
     length_m: f64,
     turn: PathAction,
+    on_route: &mut dyn FnMut(LaneIdx) -> bool,
 ) -> Vec<LaneIdx> {
     let mut out = vec![lane];
     let mut covered = net.lanes[lane].shape.length() - s0;
@@ -207,16 +329,15 @@ fn walk(
         if conns.is_empty() {
             break;
         }
-        let pick = |want: &dyn Fn(usize) -> bool| conns.iter().copied().find(|&c| want(c));
         let next_lane = |c: usize| net.connections[c].via.unwrap_or(net.connections[c].to_lane);
         let mut chosen = None;
         if turn_pending && !internal {
-            chosen = pick(&|c| dir_matches(turn, net.connections[c].dir));
+            chosen = conns.iter().copied().find(|&c| dir_matches(turn, net.connections[c].dir));
             turn_pending = false;
         }
         let chosen = chosen
-            .or_else(|| pick(&|c| on_route(net, route, net.connections[c].to_lane)))
-            .or_else(|| pick(&|c| net.connections[c].dir == TurnDir::Straight))
+            .or_else(|| conns.iter().copied().find(|&c| on_route(net.connections[c].to_lane)))
+            .or_else(|| conns.iter().copied().find(|&c| net.connections[c].dir == TurnDir::Straight))
             .unwrap_or(conns[0]);
         let next = next_lane(chosen);
         if out.contains(&next) {
@@ -229,13 +350,20 @@ fn walk(
     out
 }
 
-fn lanes_path(net: &Network, lanes: &[LaneIdx], s0: f64) -> Polyline {
+/// The centreline of `lanes` from `s0` on the first, cut [`PATH_MARGIN_M`] past `length_m`
+/// (the rest of a long lane would only be copied and searched for nothing).
+fn lanes_path(net: &Network, lanes: &[LaneIdx], s0: f64, length_m: f64) -> Polyline {
     let mut pts: Vec<Vec2> = Vec::new();
+    let mut left = length_m + PATH_MARGIN_M;
     for (i, &l) in lanes.iter().enumerate() {
+        if left <= 0.0 {
+            break;
+        }
         let shape = &net.lanes[l].shape;
-        let part =
-            if i == 0 { shape.slice(s0.clamp(0.0, shape.length()), shape.length()) } else { shape.clone() };
-        for &p in part.points() {
+        let a = if i == 0 { s0.clamp(0.0, shape.length()) } else { 0.0 };
+        let b = (a + left).min(shape.length());
+        left -= b - a;
+        for &p in shape.slice(a, b).points() {
             if pts.last().is_none_or(|q: &Vec2| q.dist(p) > 1e-3) {
                 pts.push(p);
             }
@@ -255,7 +383,8 @@ fn neighbour(net: &Network, lane: LaneIdx, left: bool) -> Option<LaneIdx> {
 }
 
 /// The world-frame path of a path action for the ego at `ego` moving at `speed_mps`, at least
-/// `length_m` long (extended straight past a dead end); `None` off the lane graph.
+/// `length_m` long (extended straight past a dead end); `None` off the lane graph. Each call
+/// searches the whole route; [`MetaResolver`] does the same with a memo across decisions.
 pub fn resolve_path(
     net: &Network,
     route: &Polyline,
@@ -264,7 +393,20 @@ pub fn resolve_path(
     action: PathAction,
     length_m: f64,
 ) -> Option<Polyline> {
-    let (lane, s) = ego_lane(net, route, ego)?;
+    MetaResolver::new().resolve_path(net, route, ego, speed_mps, action, length_m)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn resolve_from(
+    net: &Network,
+    ego: &Pose,
+    lane: LaneIdx,
+    s: f64,
+    speed_mps: f64,
+    action: PathAction,
+    length_m: f64,
+    on_route: &mut dyn FnMut(LaneIdx) -> bool,
+) -> Option<Polyline> {
     let length_m = length_m.max(1.0);
     let change = match action {
         PathAction::ChangeLaneLeft => neighbour(net, lane, true),
@@ -273,24 +415,32 @@ pub fn resolve_path(
     };
     let path = match change {
         Some(side) => {
-            let own = lanes_path(net, &walk(net, route, lane, s, length_m, PathAction::FollowLane), s);
+            let own =
+                lanes_path(net, &walk(net, lane, s, length_m, PathAction::FollowLane, on_route), s, length_m);
             let s_side = net.lanes[side].shape.project(ego.pos).map_or(0.0, |p| p.s);
-            let other =
-                lanes_path(net, &walk(net, route, side, s_side, length_m, PathAction::FollowLane), s_side);
+            let other = lanes_path(
+                net,
+                &walk(net, side, s_side, length_m, PathAction::FollowLane, on_route),
+                s_side,
+                length_m,
+            );
             let v = if speed_mps.is_finite() { speed_mps.max(0.0) } else { 0.0 };
             let ramp = (LANE_CHANGE_S * v).max(LANE_CHANGE_MIN_M);
+            // The ramp starts where the ego is, not on its lane's centre: a change asked again
+            // halfway through goes on from there instead of swinging back first.
+            let start = if ego.pos.is_finite() { ego.pos - extended(&own, 0.0) } else { Vec2::new(0.0, 0.0) };
             let n = (length_m.ceil() as usize).max(2);
             let pts = (0..=n)
                 .map(|i| {
                     let d = length_m * i as f64 / n as f64;
                     let t = (d / ramp).clamp(0.0, 1.0);
                     let w = 0.5 - 0.5 * (std::f64::consts::PI * t).cos();
-                    extended(&own, d).lerp(extended(&other, d), w)
+                    (extended(&own, d) + start).lerp(extended(&other, d), w)
                 })
                 .collect();
             Polyline::new(pts)
         }
-        None => lanes_path(net, &walk(net, route, lane, s, length_m, action), s),
+        None => lanes_path(net, &walk(net, lane, s, length_m, action, on_route), s, length_m),
     };
     if path.len() < 2 || path.length() <= 0.0 {
         return None;
@@ -303,7 +453,8 @@ fn extended(p: &Polyline, s: f64) -> Vec2 {
 }
 
 /// The waypoint plan of a meta-action: `n` ego-frame points (x forward, y left) `dt` apart on
-/// the resolved path (straight ahead along the ego heading off the lane graph).
+/// the resolved path (straight ahead along the ego heading off the lane graph). Each call
+/// searches the whole route; [`MetaResolver::waypoints`] does the same with a memo.
 pub fn meta_waypoints(
     net: &Network,
     route: &Polyline,
@@ -313,12 +464,7 @@ pub fn meta_waypoints(
     n: usize,
     dt: f64,
 ) -> Vec<(f64, f64)> {
-    let dist = speed_profile(action.speed, speed_mps, n, dt);
-    let far = dist.last().copied().unwrap_or(0.0) + 10.0;
-    match resolve_path(net, route, ego, speed_mps, action.path, far) {
-        Some(path) => super::tracker::waypoints_along(&path, ego, &dist),
-        None => dist.iter().map(|&d| (d, 0.0)).collect(),
-    }
+    MetaResolver::new().waypoints(net, route, ego, speed_mps, action, n, dt)
 }
 
 #[cfg(test)]

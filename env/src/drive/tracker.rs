@@ -22,6 +22,8 @@ pub const MAX_WAYPOINT_M: f64 = 200.0;
 const PATH_EXTENSION_M: f64 = 50.0;
 /// Plan points closer than this to the previous path point do not shape the path, m.
 const MIN_PATH_STEP_M: f64 = 0.5;
+/// A plan whose path ends nearer than this to the ego is extended along the ego heading, m.
+const MIN_DIRECTION_M: f64 = 2.0;
 
 /// The tracker's gains. `Ld = clamp(lookahead_base_m + lookahead_gain_s · v, min, max)`;
 /// desired acceleration `a = a_plan + kp·e + ki·∫e + kd·ė` with `e` the plan speed
@@ -60,7 +62,7 @@ impl Default for TrackerGains {
             lookahead_gain_s: 0.55,
             lookahead_min_m: 3.5,
             lookahead_max_m: 15.0,
-            speed_kp: 1.5,
+            speed_kp: 3.0,
             speed_ki: 0.3,
             speed_kd: 0.0,
             integral_limit_m: 2.0,
@@ -90,7 +92,8 @@ pub struct TrackingError {
 #[derive(Debug, Clone, PartialEq)]
 struct WorldPlan {
     path: Polyline,
-    /// (time since the plan arrived, speed) knots: segment k's mean speed at its mid-time.
+    /// (time since the plan arrived, speed) knots at the origin and at every point, from the
+    /// points' spacing by finite differences (see [`speed_knots`]).
     speeds: Vec<(f64, f64)>,
     /// (time, planned distance from the origin) at the origin and at every point.
     progress: Vec<(f64, f64)>,
@@ -100,13 +103,11 @@ impl WorldPlan {
     fn new(origin: Pose, points: &[(f64, f64)], dt: f64) -> WorldPlan {
         let mut pts = Vec::with_capacity(points.len() + 2);
         pts.push(origin.pos);
-        let mut speeds = Vec::with_capacity(points.len());
         let mut progress = vec![(0.0, 0.0)];
         let mut prev = origin.pos;
         for (k, &(x, y)) in points.iter().enumerate() {
             let (x, y) = (clip_coord(x), clip_coord(y));
             let w = origin.local_to_world(x, y);
-            speeds.push(((k as f64 + 0.5) * dt, w.dist(prev) / dt));
             let s_prev = progress[progress.len() - 1].1;
             progress.push(((k as f64 + 1.0) * dt, s_prev + w.dist(prev)));
             // Creeping or standing points say nothing about direction: the path keeps only
@@ -116,11 +117,18 @@ impl WorldPlan {
             }
             prev = w;
         }
-        // Extend straight on past the last point (or along the ego heading for a standing plan).
+        // Extend straight on past the last point; along the ego heading for a plan that ends
+        // within MIN_DIRECTION_M (a stop: its few centimetres of sideways scatter are no
+        // direction to steer for).
         let n = pts.len();
-        let dir = if n >= 2 { (pts[n - 1] - pts[n - 2]).normalized() } else { origin.forward() };
+        let dir = if n >= 2 && pts[n - 1].dist(origin.pos) >= MIN_DIRECTION_M {
+            (pts[n - 1] - pts[n - 2]).normalized()
+        } else {
+            origin.forward()
+        };
         pts.push(pts[n - 1] + dir * PATH_EXTENSION_M);
-        WorldPlan { path: Polyline::new(pts), speeds, progress }
+        let dists: Vec<f64> = progress.iter().map(|q| q.1).collect();
+        WorldPlan { path: Polyline::new(pts), speeds: speed_knots(&dists, dt), progress }
     }
 
     /// Planned distance from the origin at `t` (linear between points, held after the last).
@@ -152,6 +160,32 @@ impl WorldPlan {
         }
         (k[k.len() - 1].1, 0.0)
     }
+}
+
+/// Speed knots `(k·dt, v_k)` from the planned distances `s_0 = 0, s_1, …` at `k·dt`: central
+/// differences at the inner points, a second-order one-sided difference at the origin and a
+/// backward one at the last point, all at least 0. Instantaneous speeds (not the segments' means
+/// at their mid-times) keep a braking plan's front-loaded deceleration: segment means lag a
+/// convex speed curve, and the ego would end past where the plan stops.
+fn speed_knots(s: &[f64], dt: f64) -> Vec<(f64, f64)> {
+    let n = s.len() - 1;
+    if n == 1 {
+        return vec![(0.5 * dt, (s[1] - s[0]) / dt)];
+    }
+    (0..=n)
+        .map(|k| {
+            let v = if k == 0 {
+                // Bounded by twice the first segment's mean speed: a plan's first point says
+                // where the ego is in dt, not how fast it goes at the very start.
+                ((4.0 * s[1] - s[2] - 3.0 * s[0]) / (2.0 * dt)).min(2.0 * (s[1] - s[0]) / dt)
+            } else if k == n {
+                (s[n] - s[n - 1]) / dt
+            } else {
+                (s[k + 1] - s[k - 1]) / (2.0 * dt)
+            };
+            (k as f64 * dt, v.max(0.0))
+        })
+        .collect()
 }
 
 fn clip_coord(v: f64) -> f64 {
@@ -367,6 +401,27 @@ mod tests {
         tr.set_plan(s.pose, &[], 0.5);
         let s = drive(&mut tr, s, 80);
         assert!(s.speed_mps < 0.05, "{}", s.speed_mps);
+    }
+
+    #[test]
+    fn a_braking_plan_stops_where_it_ends() {
+        // 10 m/s braking at 4 m/s² from the start: at rest after 2.5 s, 12.5 m on. Replanned
+        // at 4 Hz from where the plan says the ego should be, as a planner would.
+        let mut tr = WaypointTracker::new(TrackerGains::default());
+        let mut s = EgoState::new(Pose::new(Vec2::new(0.0, 0.0), 0.0), 10.0);
+        for d in 0..24 {
+            let t0 = d as f64 * 0.25;
+            let pos = |t: f64| {
+                let t = t.min(2.5);
+                10.0 * t - 2.0 * t * t
+            };
+            let pts: Vec<(f64, f64)> =
+                (1..=8).map(|k| (pos(t0 + 0.5 * k as f64) - s.pose.pos.x, 0.0)).collect();
+            tr.set_plan(s.pose, &pts, 0.5);
+            s = drive(&mut tr, s, 5);
+        }
+        assert!(s.speed_mps < 0.2, "{}", s.speed_mps);
+        assert!((s.pose.pos.x - 12.5).abs() < 0.4, "{:?}", s.pose);
     }
 
     #[test]
