@@ -388,3 +388,15 @@ def test_ppo_on_the_native_batch_is_deterministic_and_fine_tunes_a_dagger_model(
     meta = read_meta(tuned / "model.zip")
     assert meta["init"] == str(dagger / "model.zip") and meta["steps"] == 256
     assert meta["split"]["train_seeds"][0] == TRAIN_SEED_MIN
+    # A value warm-up over the whole run: the actor is DAgger's (with the asked exploration
+    # noise), only the critic learned.
+    warm = tmp_path / "warm"
+    cli(*common, "--init", dagger / "model.zip", "--init-log-std", "-3", "--vf-warmup", "256", "--out", warm)
+    start, ended = load_model(dagger / "model.zip")[0].policy, load_model(warm / "model.zip")[0].policy
+    a, b = start.state_dict(), ended.state_dict()
+    actor = [k for k in a if k.startswith(("mlp_extractor.policy_net", "action_net"))]
+    critic = [k for k in a if k.startswith(("mlp_extractor.value_net", "value_net"))]
+    assert actor and critic
+    assert all(bool((a[k] == b[k]).all()) for k in actor)
+    assert not all(bool((a[k] == b[k]).all()) for k in critic)
+    assert bool((b["log_std"] == -3.0).all())

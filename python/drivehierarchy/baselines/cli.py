@@ -79,6 +79,18 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         type=Path,
         help="ppo: start from this model.zip's policy (e.g. a DAgger model) instead of scratch",
     )
+    tr.add_argument(
+        "--init-log-std",
+        type=float,
+        help="ppo: log σ of the exploration noise (normalised actions) at the start, e.g. -3 to fine-tune",
+    )
+    tr.add_argument(
+        "--vf-warmup",
+        type=int,
+        default=0,
+        metavar="STEPS",
+        help="ppo: train only the value function (policy frozen) for the first STEPS steps",
+    )
     tr.add_argument("--obs", default="state", choices=["state", "bev", "state+bev"])
     tr.add_argument("--bev-size", type=int, default=128, help="side of the BEV image (obs bev, state+bev)")
     tr.add_argument("--action", default="decision", choices=["decision", "raw"])
@@ -170,6 +182,8 @@ def _train(args: argparse.Namespace) -> int:
             hyperparams=_hyperparams(args.hp),
             max_minutes=args.max_minutes,
             init=args.init,
+            init_log_std=args.init_log_std,
+            vf_warmup=args.vf_warmup,
             log=_log,
         )
         return 0
