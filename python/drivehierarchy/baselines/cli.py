@@ -37,6 +37,11 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
             help="share of each category held out (--split scenarios)",
         )
         p.add_argument("--seed", type=int, default=0)
+        p.add_argument(
+            "--ray",
+            metavar="ADDRESS",
+            help="collect / dagger: drive the episodes as Ray tasks on this cluster ('local' starts one)",
+        )
 
     col = cmds.add_parser("collect", help="record expert demonstrations as a Minari dataset")
     col.add_argument("--agent", default="expert", help="demonstrator (only 'expert')")
@@ -132,7 +137,14 @@ def _collect(args: argparse.Namespace) -> int:
 
     split = split_from_args(args)
     imitation.collect(
-        split, args.episodes, args.out, agent=args.agent, noise=args.noise, seed=args.seed, log=_log
+        split,
+        args.episodes,
+        args.out,
+        agent=args.agent,
+        noise=args.noise,
+        seed=args.seed,
+        ray_address=args.ray,
+        log=_log,
     )
     (args.out / "split.json").write_text(json.dumps(split.to_dict(), indent=2) + "\n", encoding="utf-8")
     return 0
@@ -166,6 +178,8 @@ def _train(args: argparse.Namespace) -> int:
         reward=args.reward,
         traffic=args.traffic,
     )
+    if args.ray is not None and args.algo != "dagger":
+        raise ConfigError(f"config `ray` = {args.ray!r}: only `train dagger` runs its rollouts on Ray")
     if args.algo in ("ppo", "sac"):
         from drivehierarchy.baselines.rl import train_rl
 
@@ -209,6 +223,7 @@ def _train(args: argparse.Namespace) -> int:
             wrapper=wrapper,
             seed=args.seed,
             max_minutes=args.max_minutes,
+            ray_address=args.ray,
             log=_log,
         )
     return 0

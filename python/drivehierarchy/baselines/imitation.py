@@ -18,6 +18,7 @@ import os
 import time
 import warnings
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -77,13 +78,16 @@ def collect(
     agent: str = "expert",
     noise: float = 0.0,
     seed: int = 0,
+    ray_address: str | None = None,
     log: Any = print,
 ) -> Any:
     """Drives `episodes` episodes (the split's training scenarios in turn, at seeds drawn from its
     training seeds) and writes a Minari dataset under `out`.
 
     `noise` > 0: the executed action is the expert's plus Gaussian noise (σ·[0.1 steer,
-    2 m/s speed]) on every other episode; labels stay the expert's."""
+    2 m/s speed]) on every other episode; labels stay the expert's. Episode k depends only on
+    (seed, k), so `ray_address` (a Ray cluster, 'local' starts one) drives chunks of episodes as
+    Ray tasks and writes the same dataset as the in-process run."""
     import minari
 
     if agent != "expert":
@@ -94,44 +98,32 @@ def collect(
     _minari_root(out)
     if (out / DATASET_ID).exists():
         raise ConfigError(f"config `out` = {str(out)!r}: a dataset {DATASET_ID} already exists there")
-    scenarios = split.train_paths
-    base = SuiteEnv(scenarios, STATE_ONLY, order="cycle", train_seeds=split.train_seeds)
-    labelled = ExpertLabels(base)
-    env = minari.DataCollector(labelled, record_infos=True)
-    rng = np.random.default_rng(seed)
-    scale = np.array([0.1, 2.0], np.float32)
-    scores: list[float] = []
-    played: list[int] = []
+    scenarios = [str(p) for p in split.train_paths]
+    job = _DemoJob(scenarios, split.train_seeds, noise, seed)
     t0 = time.perf_counter()
-    for ep in range(episodes):
-        _, info = env.reset(seed=seed + ep)
-        played.append(int(base.episode_seed or 0))
-        noisy = noise > 0 and ep % 2 == 1
-        while True:
-            a = np.asarray(info["expert_action"], np.float32)
-            if noisy:
-                a = a + rng.normal(0.0, noise, 2).astype(np.float32) * scale
-                a = np.clip(a, base.action_space.low, base.action_space.high)  # type: ignore[attr-defined]
-            _obs, _, terminated, truncated, info = env.step(a)
-            if terminated or truncated:
-                break
-        assert labelled.last_score is not None
-        scores.append(float(labelled.last_score["score_composed"]))
+    results = _run_chunks(_demo_chunk, job, list(range(episodes)), ray_address, None)
+    buffers = [r[0] for r in results]
+    played = [r[1] for r in results]
+    scores = [r[2] for r in results]
+    probe = ExpertLabels(SuiteEnv(scenarios[:1], STATE_ONLY))
     with warnings.catch_warnings():
         # Minari nags about optional metadata (author e-mail, code permalink, env spec).
         warnings.simplefilter("ignore", UserWarning)
-        dataset = env.create_dataset(
+        dataset = minari.create_dataset_from_buffers(
             dataset_id=DATASET_ID,
+            buffer=buffers,
+            observation_space=probe.observation_space,
+            action_space=probe.action_space,
             algorithm_name="drivehierarchy expert (privileged autopilot)"
             + (f", noise {noise}" if noise else ""),
             author="drivehierarchy",
             description=(
                 "DriveHierarchy-R4 expert demonstrations: observations {'state'}, actions [steer, "
                 "target_speed_mps], infos['expert_action'] = the expert's label for each observation. "
-                f"Scenarios: {', '.join(str(p) for p in scenarios)}"
+                f"Scenarios: {', '.join(scenarios)}"
             ),
         )
-    env.close()
+    probe.close()
     (out / "collect.json").write_text(
         json.dumps(
             {
@@ -142,6 +134,7 @@ def collect(
                 "episode_seeds": played,
                 "mean_score": float(np.mean(scores)),
                 "wall_s": time.perf_counter() - t0,
+                "ray": ray_address is not None,
             },
             indent=2,
         )
@@ -153,6 +146,89 @@ def collect(
         f"-> {out / DATASET_ID}"
     )
     return dataset
+
+
+@dataclass(frozen=True)
+class _DemoJob:
+    scenarios: list[str]
+    train_seeds: tuple[int, int]
+    noise: float
+    seed: int
+
+
+def _demo_chunk(job: _DemoJob, episodes: list[int], _model: Any) -> list[tuple[Any, int, float]]:
+    """Expert episodes `episodes` (indices k: scenario k mod n, reset seed `seed + k`, DART noise
+    from its own generator on odd k): (Minari episode buffer, played seed, S_R4) of each."""
+    from minari import StepDataCallback
+    from minari.data_collector import EpisodeBuffer
+
+    base = SuiteEnv(job.scenarios, STATE_ONLY, order="cycle", train_seeds=job.train_seeds)
+    env = ExpertLabels(base)
+    record = StepDataCallback()
+    scale = np.array([0.1, 2.0], np.float32)
+    out: list[tuple[Any, int, float]] = []
+    try:
+        for k in episodes:
+            rng = np.random.default_rng([job.seed, k])
+            path = job.scenarios[k % len(job.scenarios)]
+            obs, info = env.reset(seed=job.seed + k, options={"scenario": path})
+            step = record(env=env, obs=obs, info=info)
+            buf = EpisodeBuffer(id=k, seed=job.seed + k, observations=step["observation"], infos=step["info"])
+            noisy = job.noise > 0 and k % 2 == 1
+            while True:
+                a = np.asarray(info["expert_action"], np.float32)
+                if noisy:
+                    a = a + rng.normal(0.0, job.noise, 2).astype(np.float32) * scale
+                    a = np.clip(a, base.action_space.low, base.action_space.high)  # type: ignore[attr-defined]
+                obs, rew, terminated, truncated, info = env.step(a)
+                buf = buf.add_step_data(
+                    record(
+                        env=env,
+                        obs=obs,
+                        info=info,
+                        action=a,
+                        rew=rew,
+                        terminated=terminated,
+                        truncated=truncated,
+                    )
+                )
+                if terminated or truncated:
+                    break
+            assert env.last_score is not None
+            out.append((buf, int(base.episode_seed or 0), float(env.last_score["score_composed"])))
+    finally:
+        env.close()
+    return out
+
+
+def _run_chunks(fn: Any, job: Any, episodes: list[int], ray_address: str | None, model: Any) -> list[Any]:
+    """`fn(job, episodes, model)` in this process, or over contiguous chunks of `episodes` as Ray
+    tasks (a chunk per worker CPU, several each, so a slow scenario does not hold the rest); the
+    results in episode order either way. A task gets the model's weights and rebuilds it."""
+    if ray_address is None:
+        return list(fn(job, episodes, model))
+    from drivehierarchy.benchmark.r4.dispatch import _ray_init
+
+    ray = _ray_init(ray_address)
+    cpus = max(1, int(ray.cluster_resources().get("CPU", 1)))
+    n = max(1, min(len(episodes), 4 * cpus))
+    chunks = [list(c) for c in np.array_split(np.array(episodes, dtype=np.int64), n) if len(c)]
+    params = None if model is None else ray.put(model.get_parameters())
+    task = ray.remote(_remote_chunk)
+    refs = [task.remote(fn, job, [int(k) for k in c], params) for c in chunks]
+    return [r for part in ray.get(refs) for r in part]
+
+
+def _remote_chunk(fn: Any, job: Any, episodes: list[int], params: Any) -> list[Any]:
+    """A Ray task: the learner rebuilt from its weights (one torch thread), then `fn`."""
+    model = None
+    if params is not None:
+        import torch
+
+        torch.set_num_threads(1)
+        model = new_policy_model(job.wrapper, [Path(job.scenarios[0])])
+        model.set_parameters(params)
+    return list(fn(job, episodes, model))
 
 
 def load_demos(data: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -285,46 +361,79 @@ def _round_file(out: Path, it: int) -> Path:
     return out / "rounds" / f"round_{it:03d}.npz"
 
 
-def _rollouts(
-    env: SuiteEnv,
-    model: Any,
-    wrapper: WrapperConfig,
-    *,
-    episodes: int,
-    beta: float,
-    noise: float,
-    seed: int,
-) -> tuple[np.ndarray, np.ndarray, list[float]]:
-    """`episodes` episodes with the mixture policy (expert with probability `beta` per step, else
-    the learner; with `noise` > 0 every other episode adds DART noise to what is executed);
-    returns (policy observations, normalised expert labels, S_R4 of each episode)."""
+@dataclass(frozen=True)
+class _RolloutJob:
+    scenarios: list[str]
+    train_seeds: tuple[int, int]
+    wrapper: WrapperConfig
+    beta: float
+    noise: float
+    seed: int
+    start: int  # the round's first episode plays scenarios[start mod n]
+
+
+def _rollout_chunk(
+    job: _RolloutJob, episodes: list[int], model: Any, env: SuiteEnv | None = None
+) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Episodes `episodes` of a round with the mixture policy (expert with probability `beta` per
+    step, else the learner; with `noise` > 0 odd episodes add DART noise to what is executed).
+    Episode k plays scenario start + k at reset seed `seed + k` with its own generator, so it is
+    the same wherever it runs. Returns (policy observations, normalised expert labels, S_R4)."""
+    wrapper = job.wrapper
     oc, ac = ObsCodec(wrapper), ActionCodec(wrapper)
-    rng = np.random.default_rng(seed)
     scale = np.array([0.1, 2.0], np.float32)
-    xs: list[Any] = []
-    ys: list[np.ndarray] = []
-    scores: list[float] = []
-    for ep in range(episodes):
-        obs, _ = env.reset(seed=seed + ep)  # seeds the draw of a training seed (train_seeds)
-        noisy = noise > 0 and ep % 2 == 1
-        while True:
-            expert = np.asarray(env.expert_action(), np.float32)
-            o = oc.encode(obs)
-            xs.append(o)
-            ys.append(ac.encode(expert))
-            if model is None or rng.random() < beta:
-                act = expert
-            else:
-                a, _ = model.predict(o, deterministic=True)
-                act = ac.decode(a)
-            if noisy:
-                act = act + rng.normal(0.0, noise, 2).astype(np.float32) * scale
-                act = np.clip(act, env.action_space.low, env.action_space.high)  # type: ignore[attr-defined]
-            obs, _, terminated, truncated, _ = env.step(act)
-            if terminated or truncated:
-                break
-        scores.append(float(env.score()["score_composed"]))
-    return np.stack(xs), np.stack(ys).astype(np.float32), scores
+    own = env is None
+    if env is None:
+        env = SuiteEnv(
+            job.scenarios, wrapper.env_config(STATE_ONLY), order="cycle", train_seeds=job.train_seeds
+        )
+    out: list[tuple[np.ndarray, np.ndarray, float]] = []
+    try:
+        for k in episodes:
+            rng = np.random.default_rng([job.seed, k])
+            path = job.scenarios[(job.start + k) % len(job.scenarios)]
+            obs, _ = env.reset(seed=job.seed + k, options={"scenario": path})  # seeds the seed draw
+            noisy = job.noise > 0 and k % 2 == 1
+            xs: list[Any] = []
+            ys: list[np.ndarray] = []
+            while True:
+                expert = np.asarray(env.expert_action(), np.float32)
+                o = oc.encode(obs)
+                xs.append(o)
+                ys.append(ac.encode(expert))
+                if model is None or rng.random() < job.beta:
+                    act = expert
+                else:
+                    a, _ = model.predict(o, deterministic=True)
+                    act = ac.decode(a)
+                if noisy:
+                    act = act + rng.normal(0.0, job.noise, 2).astype(np.float32) * scale
+                    act = np.clip(act, env.action_space.low, env.action_space.high)  # type: ignore[attr-defined]
+                obs, _, terminated, truncated, _ = env.step(act)
+                if terminated or truncated:
+                    break
+            out.append((np.stack(xs), np.stack(ys).astype(np.float32), float(env.score()["score_composed"])))
+    finally:
+        if own:
+            env.close()
+    return out
+
+
+def _rollouts(
+    job: _RolloutJob, episodes: int, model: Any, env: SuiteEnv, ray_address: str | None
+) -> tuple[np.ndarray, np.ndarray, list[float]]:
+    """A round's `episodes` episodes, here (on `env`) or as Ray tasks: (observations, labels,
+    S_R4 of each episode)."""
+    ks = list(range(episodes))
+    if ray_address is None:
+        results = _rollout_chunk(job, ks, model, env)
+    else:
+        results = _run_chunks(_rollout_chunk, job, ks, ray_address, model)
+    return (
+        np.concatenate([r[0] for r in results]),
+        np.concatenate([r[1] for r in results]),
+        [r[2] for r in results],
+    )
 
 
 def train_dagger(
@@ -340,6 +449,7 @@ def train_dagger(
     wrapper: WrapperConfig | None = None,
     seed: int = 0,
     max_minutes: float | None = None,
+    ray_address: str | None = None,
     log: Any = print,
 ) -> Path:
     """DAgger over the split's training scenarios and seeds. Round 0 is the demonstrations of
@@ -350,7 +460,8 @@ def train_dagger(
 
     Resumable: every round's samples (`rounds/round_NNN.npz`) and the model after it
     (`rounds/model_NNN.zip`) are kept, so a killed run continues after its last whole round.
-    `max_minutes` stops starting new rounds after that much wall time (the model is saved)."""
+    `max_minutes` stops starting new rounds after that much wall time (the model is saved).
+    `ray_address` drives each round's rollouts as Ray tasks (same samples as in-process)."""
     wrapper = _imitation_wrapper(wrapper, images=True)
     if data is not None and wrapper.obs != "state":
         raise ConfigError(
@@ -379,7 +490,6 @@ def train_dagger(
         model.set_parameters(
             PPO.load(str(out / "rounds" / f"model_{done - 1:03d}.zip"), device="cpu").get_parameters()
         )
-        env._cycle = (done - 1) * n_eps if data is not None else done * n_eps
         log(f"DAgger: resuming after round {done - 1} ({sum(len(y) for y in ys)} samples)")
     for it in range(done, iterations + 1):
         if max_minutes is not None and it > 0 and time.perf_counter() - t0 > max_minutes * 60.0:
@@ -393,15 +503,17 @@ def train_dagger(
             beta = 1.0
         else:
             beta = 1.0 if it == 0 else beta_decay**it
-            x, y, scores = _rollouts(
-                env,
-                model if it > 0 else None,
-                wrapper,
-                episodes=n_eps,
+            job = _RolloutJob(
+                scenarios=[str(p) for p in split.train_paths],
+                train_seeds=split.train_seeds,
+                wrapper=wrapper,
                 beta=beta,
                 noise=noise if it == 0 else 0.0,
                 seed=seed + 1000 * it,
+                # Rounds take the training files in turn, continuing where the last round ended.
+                start=((it - 1) if data is not None else it) * n_eps,
             )
+            x, y, scores = _rollouts(job, n_eps, model if it > 0 else None, env, ray_address)
         roll_s = time.perf_counter() - r0
         save = np.savez_compressed if x.dtype == np.uint8 else np.savez  # BEV images compress well
         save(_round_file(out, it).with_suffix(".tmp.npz"), x=x, y=y)
