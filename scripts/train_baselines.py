@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import os
 import re
 import shutil
 import time
@@ -209,6 +210,10 @@ def test_suite(a: argparse.Namespace, slug: str) -> Path | str:
 
 
 def evaluate(a: argparse.Namespace, agents: dict[str, str]) -> None:
+    # One OpenMP thread in the evaluation's SUMO worker processes: a policy's per-decision
+    # forward pass gains nothing from more, and spinning OpenMP threads on a busy 2-core machine
+    # made the BEV CNN's SUMO scenes 10-20x slower (50-140 s instead of 3-6 s per episode).
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
     for slug, agent in agents.items():
         ev = a.out / "eval" / slug
         if (ev / "summary.json").exists():
