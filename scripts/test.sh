@@ -86,6 +86,7 @@ QUICK_SKIP=(
     # does not import torch and Ray (3 CPU-s per worker).
     --ignore=tests/vlm/test_transformers_serve.py
     --ignore=tests/vlm/test_vlm_ray.py
+    --ignore=tests/baselines/test_baselines_ray.py
     -m "not serving and not ray"
 )
 

@@ -210,7 +210,7 @@ def test_dagger_on_the_bev_image_trains_a_cnn_from_its_own_rollouts(suite: Path,
         *("--iterations", "1", "--episodes-per-iter", "1", "--epochs", "2", "--out", out),
     )
     agent = Sb3Agent(out / "model.zip")
-    assert agent.uses_images and agent.wrapper.obs == "bev" and agent.wrapper.bev_size == 48
+    assert agent.wrapper.uses_images and agent.wrapper.obs == "bev" and agent.wrapper.bev_size == 48
     assert "features_extractor" in str(agent.model.policy)
     with np.load(out / "rounds" / "round_000.npz") as z:
         assert z["x"].dtype == np.uint8 and z["x"].shape[1:] == (48, 48, 3)
@@ -351,8 +351,8 @@ def test_a_bev_cnn_policy_trains_and_sees_the_protocols_bev_when_evaluated(tmp_p
         *("--out", out),
     )
     agent = Sb3Agent(out / "model.zip")
-    assert agent.uses_images is True and agent.wrapper.bev_size == 64
-    # The runner renders the protocol's 800×800 BEV for an image agent; the agent downsamples it.
+    assert agent.wrapper.uses_images and agent.wrapper.bev_size == 64
+    # The agent renders its 64 px BEV from the runner's env, as the training env did.
     model = f"sb3:{out / 'model.zip'}"
     cli("r4", "run", "--agent", model, "--scenario", INTERSECTION, "--out", tmp_path / "ev")
     record = json.loads(next((tmp_path / "ev" / "scenes").glob("*/scene_score.json")).read_text())
@@ -388,3 +388,15 @@ def test_ppo_on_the_native_batch_is_deterministic_and_fine_tunes_a_dagger_model(
     meta = read_meta(tuned / "model.zip")
     assert meta["init"] == str(dagger / "model.zip") and meta["steps"] == 256
     assert meta["split"]["train_seeds"][0] == TRAIN_SEED_MIN
+    # A value warm-up over the whole run: the actor is DAgger's (with the asked exploration
+    # noise), only the critic learned.
+    warm = tmp_path / "warm"
+    cli(*common, "--init", dagger / "model.zip", "--init-log-std", "-3", "--vf-warmup", "256", "--out", warm)
+    start, ended = load_model(dagger / "model.zip")[0].policy, load_model(warm / "model.zip")[0].policy
+    a, b = start.state_dict(), ended.state_dict()
+    actor = [k for k in a if k.startswith(("mlp_extractor.policy_net", "action_net"))]
+    critic = [k for k in a if k.startswith(("mlp_extractor.value_net", "value_net"))]
+    assert actor and critic
+    assert all(bool((a[k] == b[k]).all()) for k in actor)
+    assert not all(bool((a[k] == b[k]).all()) for k in critic)
+    assert bool((b["log_std"] == -3.0).all())

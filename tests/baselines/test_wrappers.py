@@ -28,6 +28,7 @@ from drivehierarchy.scenarios import builtin_root, builtin_scenarios
 
 PED = builtin_root() / "r4" / "01_pedestrian" / "town01_01_midblock_crossing.toml"
 BRAKE = builtin_root() / "r4" / "07_sudden_brake" / "town01_07_lead_brakes.toml"
+TURN = builtin_root() / "r4" / "03_turning" / "town01_03_right_turn_signalised.toml"
 # Score-record fields measuring wall-clock time (names before/after protocol v2).
 WALL_CLOCK_KEYS = ("wall_duration", "duration_system")
 STATE_ONLY = R4Config(front=None, bev=None, prompt=False)
@@ -78,11 +79,52 @@ def test_obs_codec_scales_state_and_one_hots_the_command() -> None:
     cmd = int(obs["state"][STATE_FIELDS.index("command")])
     assert x[-6:].sum() == 1.0 and x[-6 + cmd - 1] == 1.0
     assert np.all(np.abs(x) <= 10.0)
-    # The protocol's 800×800 BEV is area-downsampled to the policy's size.
+    # The protocol's 800×800 BEV is never resized (that image differs from the one the policy
+    # trained on): the world renders the policy's size instead, or the codec refuses.
     big = DriveHierarchyR4Env(scenario=PED, config=R4Config(front=None, prompt=False))
     obs_big, _ = big.reset(seed=0)
-    img = ObsCodec(WrapperConfig(obs="bev", bev_size=128)).bev(obs_big)
+    bev = ObsCodec(WrapperConfig(obs="bev", bev_size=128))
+    img = bev.bev(obs_big, big.sim)
     assert img.shape == (128, 128, 3) and img.dtype == np.uint8 and img.std() > 0
+    with pytest.raises(ConfigError, match=r"`bev.size_px` = 800"):
+        bev.bev(obs_big)
+
+
+@pytest.mark.parametrize("protocol_bev", [False, True], ids=["runner-drops-images", "with-800px-bev"])
+def test_a_bev_policy_sees_byte_identical_images_in_training_and_at_evaluation(
+    tmp_path: Path, protocol_bev: bool
+) -> None:
+    """Same scenario, seed and actions: the `sb3:` agent's observation on the evaluation env
+    (the runner's config: protocol images dropped, or the 800×800 BEV kept, as with `--frames`)
+    equals DAgger's (`SuiteEnv` + `ObsCodec`) and PPO's (`make_env`) training observation."""
+    from drivehierarchy.agents.sb3 import Sb3Agent
+    from drivehierarchy.baselines.imitation import new_policy_model
+    from drivehierarchy.baselines.model_io import save_model
+
+    wrapper = WrapperConfig(obs="bev")
+    path = save_model(new_policy_model(wrapper, [TURN]), tmp_path / "m.zip", "ppo", wrapper)
+    agent = Sb3Agent(path)
+    assert agent.uses_images is False  # it renders its own BEV; the runner may drop the protocol's
+    config = R4Config() if protocol_bev else R4Config().replace(front=None, bev=None)
+    ev = DriveHierarchyR4Env(scenario=TURN, config=config)
+    dagger = SuiteEnv([TURN], wrapper.env_config(STATE_ONLY), order="cycle")
+    ppo = make_env([TURN], wrapper, monitor=False)
+    obs_ev, info = ev.reset(seed=3)
+    agent.reset(ev, info)
+    obs_dagger, _ = dagger.reset(seed=3)
+    obs_ppo, _ = ppo.reset(seed=3)
+    codec, actions = ObsCodec(wrapper), ActionCodec(wrapper)
+    for _ in range(30):
+        seen = agent.observe(obs_ev)
+        assert seen.shape == (128, 128, 3) and seen.dtype == np.uint8
+        assert seen.tobytes() == codec.encode(obs_dagger).tobytes() == obs_ppo.tobytes()
+        a = ev.expert_action()
+        obs_ev, _, end, trunc, _ = ev.step(a)
+        obs_dagger, *_ = dagger.step(a)
+        obs_ppo, *_ = ppo.step(actions.encode(a))
+        if end or trunc:
+            break
+    assert ev.sim.score()["decisions"] >= 30
 
 
 def test_shaped_reward_never_changes_the_benchmark_score() -> None:

@@ -36,8 +36,10 @@ class Sb3Agent:
         self.action_codec = ActionCodec(self.wrapper)
         self.deterministic = deterministic
         self.name = f"sb3:{self.path}"
-        # State policies never look at images, so runners can switch rendering off.
-        self.uses_images = self.wrapper.uses_images
+        # A BEV policy renders its own small BEV from the env's world (`observe`), exactly as it
+        # did in training; it never looks at the protocol's images, so runners can switch them off.
+        self.uses_images = False
+        self._sim: Any = None
 
     def reset(self, env: gym.Env[Any, Any], info: dict[str, Any]) -> None:
         config = getattr(env.unwrapped, "config", None)
@@ -55,10 +57,15 @@ class Sb3Agent:
                     f"config `waypoints`/`waypoint_dt_s` = {plan!r}: the model {self.path} plans "
                     f"{trained[0]} points {trained[1]} s apart"
                 )
+        self._sim = getattr(env.unwrapped, "sim", None) if self.wrapper.uses_images else None
+
+    def observe(self, observation: dict[str, Any]) -> Any:
+        """What the policy sees: the scaled state and/or the BEV rendered at the policy's size by
+        the world of the env given to `reset` (byte-identical to the training observation)."""
+        return self.obs_codec.encode(observation, self._sim)
 
     def act(self, observation: dict[str, Any], info: dict[str, Any]) -> np.ndarray:
-        obs = self.obs_codec.encode(observation)
-        action, _ = self.model.predict(obs, deterministic=self.deterministic)
+        action, _ = self.model.predict(self.observe(observation), deterministic=self.deterministic)
         return self.action_codec.decode(action)
 
 

@@ -38,6 +38,11 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
             help="share of each category held out (--split scenarios)",
         )
         p.add_argument("--seed", type=int, default=0)
+        p.add_argument(
+            "--ray",
+            metavar="ADDRESS",
+            help="collect / dagger: drive the episodes as Ray tasks on this cluster ('local' starts one)",
+        )
 
     def level_arg(p: argparse.ArgumentParser, default: str | None, extra: str = "") -> None:
         p.add_argument(
@@ -90,6 +95,18 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "--init",
         type=Path,
         help="ppo: start from this model.zip's policy (e.g. a DAgger model) instead of scratch",
+    )
+    tr.add_argument(
+        "--init-log-std",
+        type=float,
+        help="ppo: log σ of the exploration noise (normalised actions) at the start, e.g. -3 to fine-tune",
+    )
+    tr.add_argument(
+        "--vf-warmup",
+        type=int,
+        default=0,
+        metavar="STEPS",
+        help="ppo: train only the value function (policy frozen) for the first STEPS steps",
     )
     tr.add_argument("--obs", default="state", choices=["state", "bev", "state+bev"])
     tr.add_argument("--bev-size", type=int, default=128, help="side of the BEV image (obs bev, state+bev)")
@@ -150,6 +167,7 @@ def _collect(args: argparse.Namespace) -> int:
         noise=args.noise,
         seed=args.seed,
         action_level=args.action_level,
+        ray_address=args.ray,
         log=_log,
     )
     (args.out / "split.json").write_text(json.dumps(split.to_dict(), indent=2) + "\n", encoding="utf-8")
@@ -193,6 +211,8 @@ def _train(args: argparse.Namespace) -> int:
         traffic=args.traffic,
         **level,
     )
+    if args.ray is not None and args.algo != "dagger":
+        raise ConfigError(f"config `ray` = {args.ray!r}: only `train dagger` runs its rollouts on Ray")
     if args.algo in ("ppo", "sac"):
         from drivehierarchy.baselines.rl import train_rl
 
@@ -209,6 +229,8 @@ def _train(args: argparse.Namespace) -> int:
             hyperparams=_hyperparams(args.hp),
             max_minutes=args.max_minutes,
             init=args.init,
+            init_log_std=args.init_log_std,
+            vf_warmup=args.vf_warmup,
             log=_log,
         )
         return 0
@@ -234,6 +256,7 @@ def _train(args: argparse.Namespace) -> int:
             wrapper=wrapper,
             seed=args.seed,
             max_minutes=args.max_minutes,
+            ray_address=args.ray,
             log=_log,
         )
     return 0

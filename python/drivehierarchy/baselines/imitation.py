@@ -24,6 +24,7 @@ import os
 import time
 import warnings
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -93,6 +94,7 @@ def collect(
     noise: float = 0.0,
     seed: int = 0,
     action_level: str = "control",
+    ray_address: str | None = None,
     log: Any = print,
 ) -> Any:
     """Drives `episodes` episodes (the split's training scenarios in turn, at seeds drawn from its
@@ -101,11 +103,12 @@ def collect(
 
     `noise` > 0: the executed action is the expert's plus DART noise (`ActionCodec.perturb`:
     σ·[0.1 steer, 2 m/s speed] at the control level) on every other episode; labels stay the
-    expert's."""
+    expert's. Episode k depends only on (seed, k), so `ray_address` (a Ray cluster, 'local'
+    starts one) drives chunks of episodes as Ray tasks and writes the same dataset as the
+    in-process run."""
     import minari
 
     config = level_config(action_level)
-    codec = ActionCodec(WrapperConfig(action_level=action_level))  # type: ignore[arg-type]
     if agent != "expert":
         raise ConfigError(f"config `agent` = {agent!r}: demonstrations come from the privileged 'expert'")
     if episodes < 1:
@@ -114,32 +117,22 @@ def collect(
     _minari_root(out)
     if (out / DATASET_ID).exists():
         raise ConfigError(f"config `out` = {str(out)!r}: a dataset {DATASET_ID} already exists there")
-    scenarios = split.train_paths
-    base = SuiteEnv(scenarios, config, order="cycle", train_seeds=split.train_seeds)
-    labelled = ExpertLabels(base)
-    env = minari.DataCollector(labelled, record_infos=True)
-    rng = np.random.default_rng(seed)
-    scores: list[float] = []
-    played: list[int] = []
+    scenarios = [str(p) for p in split.train_paths]
+    job = _DemoJob(scenarios, split.train_seeds, noise, seed, action_level)
     t0 = time.perf_counter()
-    for ep in range(episodes):
-        _, info = env.reset(seed=seed + ep)
-        played.append(int(base.episode_seed or 0))
-        noisy = noise > 0 and ep % 2 == 1
-        while True:
-            a = np.asarray(info["expert_action"])
-            if noisy:
-                a = codec.perturb(a, rng, noise)
-            _obs, _, terminated, truncated, info = env.step(a)
-            if terminated or truncated:
-                break
-        assert labelled.last_score is not None
-        scores.append(float(labelled.last_score["score_composed"]))
+    results = _run_chunks(_demo_chunk, job, list(range(episodes)), ray_address, None)
+    buffers = [r[0] for r in results]
+    played = [r[1] for r in results]
+    scores = [r[2] for r in results]
+    probe = ExpertLabels(SuiteEnv(scenarios[:1], config))
     with warnings.catch_warnings():
         # Minari nags about optional metadata (author e-mail, code permalink, env spec).
         warnings.simplefilter("ignore", UserWarning)
-        dataset = env.create_dataset(
+        dataset = minari.create_dataset_from_buffers(
             dataset_id=DATASET_ID,
+            buffer=buffers,
+            observation_space=probe.observation_space,
+            action_space=probe.action_space,
             algorithm_name="drivehierarchy expert (privileged autopilot)"
             + (f", noise {noise}" if noise else ""),
             author="drivehierarchy",
@@ -147,10 +140,10 @@ def collect(
                 "DriveHierarchy-R4 expert demonstrations: observations {'state'}, actions "
                 f"{LEVEL_ACTIONS[action_level]} (action level {action_level!r}), "
                 "infos['expert_action'] = the expert's label for each observation. "
-                f"Scenarios: {', '.join(str(p) for p in scenarios)}"
+                f"Scenarios: {', '.join(scenarios)}"
             ),
         )
-    env.close()
+    probe.close()
     (out / "collect.json").write_text(
         json.dumps(
             {
@@ -164,6 +157,7 @@ def collect(
                 "episode_seeds": played,
                 "mean_score": float(np.mean(scores)),
                 "wall_s": time.perf_counter() - t0,
+                "ray": ray_address is not None,
             },
             indent=2,
         )
@@ -211,6 +205,90 @@ def check_demos_level(data: Path, wrapper: WrapperConfig) -> None:
             f"at {have[key]!r} but this run trains at {want[key]!r} (pass --action-level "
             f"{have['action_level']} or collect at {want['action_level']})"
         )
+
+
+@dataclass(frozen=True)
+class _DemoJob:
+    scenarios: list[str]
+    train_seeds: tuple[int, int]
+    noise: float
+    seed: int
+    action_level: str = "control"
+
+
+def _demo_chunk(job: _DemoJob, episodes: list[int], _model: Any) -> list[tuple[Any, int, float]]:
+    """Expert episodes `episodes` at the job's action level (indices k: scenario k mod n, reset
+    seed `seed + k`, DART noise (`ActionCodec.perturb`) from its own generator on odd k):
+    (Minari episode buffer, played seed, S_R4) of each."""
+    from minari import StepDataCallback
+    from minari.data_collector import EpisodeBuffer
+
+    base = SuiteEnv(job.scenarios, level_config(job.action_level), order="cycle", train_seeds=job.train_seeds)
+    env = ExpertLabels(base)
+    codec = ActionCodec(WrapperConfig(action_level=job.action_level))  # type: ignore[arg-type]
+    record = StepDataCallback()
+    out: list[tuple[Any, int, float]] = []
+    try:
+        for k in episodes:
+            rng = np.random.default_rng([job.seed, k])
+            path = job.scenarios[k % len(job.scenarios)]
+            obs, info = env.reset(seed=job.seed + k, options={"scenario": path})
+            step = record(env=env, obs=obs, info=info)
+            buf = EpisodeBuffer(id=k, seed=job.seed + k, observations=step["observation"], infos=step["info"])
+            noisy = job.noise > 0 and k % 2 == 1
+            while True:
+                a = np.asarray(info["expert_action"])  # int64 classes at meta, else float32
+                if noisy:
+                    a = codec.perturb(a, rng, job.noise)
+                obs, rew, terminated, truncated, info = env.step(a)
+                buf = buf.add_step_data(
+                    record(
+                        env=env,
+                        obs=obs,
+                        info=info,
+                        action=a,
+                        rew=rew,
+                        terminated=terminated,
+                        truncated=truncated,
+                    )
+                )
+                if terminated or truncated:
+                    break
+            assert env.last_score is not None
+            out.append((buf, int(base.episode_seed or 0), float(env.last_score["score_composed"])))
+    finally:
+        env.close()
+    return out
+
+
+def _run_chunks(fn: Any, job: Any, episodes: list[int], ray_address: str | None, model: Any) -> list[Any]:
+    """`fn(job, episodes, model)` in this process, or over contiguous chunks of `episodes` as Ray
+    tasks (a chunk per worker CPU, several each, so a slow scenario does not hold the rest); the
+    results in episode order either way. A task gets the model's weights and rebuilds it."""
+    if ray_address is None:
+        return list(fn(job, episodes, model))
+    from drivehierarchy.benchmark.r4.dispatch import _ray_init
+
+    ray = _ray_init(ray_address)
+    cpus = max(1, int(ray.cluster_resources().get("CPU", 1)))
+    n = max(1, min(len(episodes), 4 * cpus))
+    chunks = [list(c) for c in np.array_split(np.array(episodes, dtype=np.int64), n) if len(c)]
+    params = None if model is None else ray.put(model.get_parameters())
+    task = ray.remote(_remote_chunk)
+    refs = [task.remote(fn, job, [int(k) for k in c], params) for c in chunks]
+    return [r for part in ray.get(refs) for r in part]
+
+
+def _remote_chunk(fn: Any, job: Any, episodes: list[int], params: Any) -> list[Any]:
+    """A Ray task: the learner rebuilt from its weights (one torch thread), then `fn`."""
+    model = None
+    if params is not None:
+        import torch
+
+        torch.set_num_threads(1)
+        model = new_policy_model(job.wrapper, [Path(job.scenarios[0])])
+        model.set_parameters(params)
+    return list(fn(job, episodes, model))
 
 
 def load_demos(data: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -352,44 +430,78 @@ def _round_file(out: Path, it: int) -> Path:
     return out / "rounds" / f"round_{it:03d}.npz"
 
 
-def _rollouts(
-    env: SuiteEnv,
-    model: Any,
-    wrapper: WrapperConfig,
-    *,
-    episodes: int,
-    beta: float,
-    noise: float,
-    seed: int,
-) -> tuple[np.ndarray, np.ndarray, list[float]]:
-    """`episodes` episodes with the mixture policy (expert with probability `beta` per step, else
-    the learner; with `noise` > 0 every other episode adds DART noise to what is executed);
-    returns (policy observations, normalised expert labels, S_R4 of each episode)."""
+@dataclass(frozen=True)
+class _RolloutJob:
+    scenarios: list[str]
+    train_seeds: tuple[int, int]
+    wrapper: WrapperConfig
+    beta: float
+    noise: float
+    seed: int
+    start: int  # the round's first episode plays scenarios[start mod n]
+
+
+def _rollout_chunk(
+    job: _RolloutJob, episodes: list[int], model: Any, env: SuiteEnv | None = None
+) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Episodes `episodes` of a round with the mixture policy (expert with probability `beta` per
+    step, else the learner; with `noise` > 0 odd episodes add DART noise to what is executed).
+    Episode k plays scenario start + k at reset seed `seed + k` with its own generator, so it is
+    the same wherever it runs. Returns (policy observations, normalised expert labels, S_R4)."""
+    wrapper = job.wrapper
     oc, ac = ObsCodec(wrapper), ActionCodec(wrapper)
-    rng = np.random.default_rng(seed)
-    xs: list[Any] = []
-    ys: list[np.ndarray] = []
-    scores: list[float] = []
-    for ep in range(episodes):
-        obs, _ = env.reset(seed=seed + ep)  # seeds the draw of a training seed (train_seeds)
-        noisy = noise > 0 and ep % 2 == 1
-        while True:
-            expert = np.asarray(env.expert_action())
-            o = oc.encode(obs)
-            xs.append(o)
-            ys.append(ac.encode(expert))
-            if model is None or rng.random() < beta:
-                act = expert
-            else:
-                a, _ = model.predict(o, deterministic=True)
-                act = ac.decode(a)
-            if noisy:
-                act = ac.perturb(act, rng, noise)
-            obs, _, terminated, truncated, _ = env.step(act)
-            if terminated or truncated:
-                break
-        scores.append(float(env.score()["score_composed"]))
-    return np.stack(xs), np.stack(ys), scores
+    own = env is None
+    if env is None:
+        env = SuiteEnv(
+            job.scenarios, wrapper.env_config(STATE_ONLY), order="cycle", train_seeds=job.train_seeds
+        )
+    out: list[tuple[np.ndarray, np.ndarray, float]] = []
+    try:
+        for k in episodes:
+            rng = np.random.default_rng([job.seed, k])
+            path = job.scenarios[(job.start + k) % len(job.scenarios)]
+            obs, _ = env.reset(seed=job.seed + k, options={"scenario": path})  # seeds the seed draw
+            noisy = job.noise > 0 and k % 2 == 1
+            xs: list[Any] = []
+            ys: list[np.ndarray] = []
+            while True:
+                expert = np.asarray(env.expert_action())
+                o = oc.encode(obs)
+                xs.append(o)
+                ys.append(ac.encode(expert))
+                if model is None or rng.random() < job.beta:
+                    act = expert
+                else:
+                    a, _ = model.predict(o, deterministic=True)
+                    act = ac.decode(a)
+                if noisy:
+                    act = ac.perturb(act, rng, job.noise)
+                obs, _, terminated, truncated, _ = env.step(act)
+                if terminated or truncated:
+                    break
+            # Labels keep the codec's dtype: int64 classes at meta, float32 otherwise.
+            out.append((np.stack(xs), np.stack(ys), float(env.score()["score_composed"])))
+    finally:
+        if own:
+            env.close()
+    return out
+
+
+def _rollouts(
+    job: _RolloutJob, episodes: int, model: Any, env: SuiteEnv, ray_address: str | None
+) -> tuple[np.ndarray, np.ndarray, list[float]]:
+    """A round's `episodes` episodes, here (on `env`) or as Ray tasks: (observations, labels,
+    S_R4 of each episode)."""
+    ks = list(range(episodes))
+    if ray_address is None:
+        results = _rollout_chunk(job, ks, model, env)
+    else:
+        results = _run_chunks(_rollout_chunk, job, ks, ray_address, model)
+    return (
+        np.concatenate([r[0] for r in results]),
+        np.concatenate([r[1] for r in results]),
+        [r[2] for r in results],
+    )
 
 
 def train_dagger(
@@ -405,6 +517,7 @@ def train_dagger(
     wrapper: WrapperConfig | None = None,
     seed: int = 0,
     max_minutes: float | None = None,
+    ray_address: str | None = None,
     log: Any = print,
 ) -> Path:
     """DAgger over the split's training scenarios and seeds. Round 0 is the demonstrations of
@@ -415,7 +528,8 @@ def train_dagger(
 
     Resumable: every round's samples (`rounds/round_NNN.npz`) and the model after it
     (`rounds/model_NNN.zip`) are kept, so a killed run continues after its last whole round.
-    `max_minutes` stops starting new rounds after that much wall time (the model is saved)."""
+    `max_minutes` stops starting new rounds after that much wall time (the model is saved).
+    `ray_address` drives each round's rollouts as Ray tasks (same samples as in-process)."""
     wrapper = _imitation_wrapper(wrapper, images=True)
     if data is not None:
         check_demos_level(data, wrapper)
@@ -446,7 +560,6 @@ def train_dagger(
         model.set_parameters(
             PPO.load(str(out / "rounds" / f"model_{done - 1:03d}.zip"), device="cpu").get_parameters()
         )
-        env._cycle = (done - 1) * n_eps if data is not None else done * n_eps
         log(f"DAgger: resuming after round {done - 1} ({sum(len(y) for y in ys)} samples)")
     for it in range(done, iterations + 1):
         if max_minutes is not None and it > 0 and time.perf_counter() - t0 > max_minutes * 60.0:
@@ -460,15 +573,17 @@ def train_dagger(
             beta = 1.0
         else:
             beta = 1.0 if it == 0 else beta_decay**it
-            x, y, scores = _rollouts(
-                env,
-                model if it > 0 else None,
-                wrapper,
-                episodes=n_eps,
+            job = _RolloutJob(
+                scenarios=[str(p) for p in split.train_paths],
+                train_seeds=split.train_seeds,
+                wrapper=wrapper,
                 beta=beta,
                 noise=noise if it == 0 else 0.0,
                 seed=seed + 1000 * it,
+                # Rounds take the training files in turn, continuing where the last round ended.
+                start=((it - 1) if data is not None else it) * n_eps,
             )
+            x, y, scores = _rollouts(job, n_eps, model if it > 0 else None, env, ray_address)
         roll_s = time.perf_counter() - r0
         save = np.savez_compressed if x.dtype == np.uint8 else np.savez  # BEV images compress well
         save(_round_file(out, it).with_suffix(".tmp.npz"), x=x, y=y)

@@ -165,12 +165,19 @@ def train_rl(
     hyperparams: dict[str, Any] | None = None,
     max_minutes: float | None = None,
     init: Path | None = None,
+    init_log_std: float | None = None,
+    vf_warmup: int = 0,
     log: Any = print,
 ) -> Path:
     """Trains (or resumes) and writes OUT/model.zip on the split's training scenarios and seeds.
     `max_minutes` stops this run's learning after that much wall time (the model is saved as
     usual; a later run resumes from it). `init`: a model.zip (e.g. DAgger's, a PPO actor-critic
-    of the same wrapper) whose policy weights PPO starts from (fine-tuning)."""
+    of the same wrapper) whose policy weights PPO starts from (fine-tuning).
+
+    Fine-tuning keeps near its start with `init_log_std` (the exploration noise, log σ of the
+    normalised action, replacing the init's) and `vf_warmup` (the first N steps train only the
+    value function, the policy frozen: an imitation model's critic is untrained, and PPO steps
+    on its advantages would first move the policy away from the expert's)."""
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
 
     if steps < 1:
@@ -219,23 +226,44 @@ def train_rl(
             start, _, _ = load_model(init)
             model.policy.load_state_dict(start.policy.state_dict())
             log(f"initialised the policy from {init}")
+        if init_log_std is not None:
+            import torch as th
+
+            if not hasattr(model.policy, "log_std"):
+                raise ConfigError(
+                    f"config `init_log_std` = {init_log_std!r}: {algo} has no state-independent log σ"
+                )
+            with th.no_grad():
+                model.policy.log_std.fill_(float(init_log_std))
         reset = True
-    remaining = steps - model.num_timesteps
-    if remaining > 0:
-        cb = CheckpointCallback(
-            save_freq=max(1, checkpoint_every // n_envs),
-            save_path=str(out / "checkpoints"),
-            save_replay_buffer=(algo == "sac"),
-        )
-        callbacks: list[Any] = [cb]
-        if max_minutes is not None:
-            callbacks.append(wall_clock_limit(max_minutes * 60.0))
+    if vf_warmup > 0 and algo != "ppo":
+        raise ConfigError(f"config `vf_warmup` = {vf_warmup!r}: only PPO has a separate value function")
+    cb = CheckpointCallback(
+        save_freq=max(1, checkpoint_every // n_envs),
+        save_path=str(out / "checkpoints"),
+        save_replay_buffer=(algo == "sac"),
+    )
+    callbacks: list[Any] = [cb]
+    limit = wall_clock_limit(max_minutes * 60.0) if max_minutes is not None else None
+    if limit is not None:
+        callbacks.append(limit)
+    # Phases: the value warm-up (policy frozen) up to `vf_warmup` steps, then everything. The
+    # step counter is in every checkpoint, so a resumed run continues in the right phase.
+    for end, frozen in ((min(vf_warmup, steps), True), (steps, False)):
+        remaining = end - model.num_timesteps
+        if remaining <= 0 or (limit is not None and limit.expired):
+            continue
+        if frozen:
+            log(f"value warm-up: policy frozen until step {end}")
+        _freeze_policy(model, frozen)
         model.learn(
             total_timesteps=remaining,
             callback=CallbackList(callbacks),
             reset_num_timesteps=reset,
             tb_log_name=algo,
         )
+        reset = False
+    _freeze_policy(model, False)
     wall = time.perf_counter() - t0
     extra: dict[str, Any] = {"steps": int(model.num_timesteps), "split": split.to_dict()}
     if init is not None:
@@ -257,7 +285,8 @@ def train_rl(
 
 
 def wall_clock_limit(seconds: float) -> Any:
-    """A callback ending `learn` after `seconds` of wall time (built on use: SB3 is optional)."""
+    """A callback ending `learn` after `seconds` of wall time (built on use: SB3 is optional);
+    its clock runs from its creation, across `learn` calls."""
     from stable_baselines3.common.callbacks import BaseCallback
 
     class WallClockLimit(BaseCallback):
@@ -265,10 +294,30 @@ def wall_clock_limit(seconds: float) -> Any:
             super().__init__()
             self.t0 = time.perf_counter()
 
+        @property
+        def expired(self) -> bool:
+            return time.perf_counter() - self.t0 >= seconds
+
         def _on_step(self) -> bool:
-            return time.perf_counter() - self.t0 < seconds
+            return not self.expired
 
     return WallClockLimit()
+
+
+def _freeze_policy(model: Any, frozen: bool) -> None:
+    """Stops (or restarts) gradient updates of a PPO actor: its own layers, mean head and log σ
+    (the critic's layers and the parameter-free feature extractor of an MLP keep learning)."""
+    policy = model.policy
+    if not hasattr(policy, "action_net"):
+        return
+    actor = [policy.action_net.parameters(), policy.mlp_extractor.policy_net.parameters()]
+    if getattr(policy, "log_std", None) is not None:
+        actor.append(iter([policy.log_std]))
+    if not getattr(policy, "share_features_extractor", True):
+        actor.append(policy.pi_features_extractor.parameters())
+    for params in actor:
+        for p in params:
+            p.requires_grad_(not frozen)
 
 
 def _init_policy_kwargs(init: Path, algo: str, wrapper: WrapperConfig) -> dict[str, Any]:

@@ -134,12 +134,14 @@ class WrapperConfig:
             data["shaping"] = RewardConfig(**shaping)
         return cls(**data)
 
+    def bev_config(self) -> BevConfig:
+        """The policy's BEV: `bev_size` pixels over the protocol's 100 m field of view."""
+        return BevConfig(size_px=self.bev_size, px_per_m=self.bev_size / PROTOCOL_BEV_SPAN_M)
+
     def env_config(self, base: R4Config | None = None) -> R4Config:
         """The env settings this view needs: no front camera or prompt; a small BEV if used."""
         base = base or R4Config()
-        bev = None
-        if self.uses_images:
-            bev = BevConfig(size_px=self.bev_size, px_per_m=self.bev_size / PROTOCOL_BEV_SPAN_M)
+        bev = self.bev_config() if self.uses_images else None
         traffic = self.traffic if self.traffic is not None else base.traffic
         return base.replace(
             action_mode=self.env_action_mode,
@@ -261,12 +263,14 @@ class ObsCodec:
 
     state: the 60 state fields each divided by a fixed scale (metres by 20–100, speeds by 10, …),
     the navigation command one-hot (6) instead of its code, clipped to ±10 — fixed, so nothing
-    has to be saved beside the model. bev: the small BEV image (H×W×3 uint8).
+    has to be saved beside the model. bev: the small BEV image (H×W×3 uint8), rendered at
+    that size by the world (never resized from another image).
     """
 
     def __init__(self, config: WrapperConfig) -> None:
         self.kind = config.obs
         self.bev_size = int(config.bev_size)
+        self.bev_config = config.bev_config()
         self.state_dim = len(STATE_FIELDS) - 1 + N_COMMANDS
         state_space = spaces.Box(-STATE_CLIP, STATE_CLIP, (self.state_dim,), np.float32)
         bev_space = spaces.Box(0, 255, (self.bev_size, self.bev_size, 3), np.uint8)
@@ -286,26 +290,32 @@ class ObsCodec:
         out = np.concatenate([np.delete(s, _COMMAND), onehot])
         return np.clip(out, -STATE_CLIP, STATE_CLIP).astype(np.float32)
 
-    def bev(self, obs: dict[str, Any]) -> np.ndarray:
+    def bev(self, obs: dict[str, Any], sim: Any = None) -> np.ndarray:
+        """The policy's BEV. With `sim` (an evaluation env playing the protocol's 800×800 BEV, or
+        none), the world renders it at the policy's size: the same renderer and settings as a
+        training env's observation, so a policy sees byte-identical images in training and at
+        evaluation (a downsampled 800×800 BEV differs: its route line is faint at 128 px)."""
+        if sim is not None:
+            return np.asarray(sim.render_bev(self.bev_config), dtype=np.uint8)
         img = obs.get("bev")
         if img is None:
             raise ConfigError("config `obs` = 'bev': the env gives no BEV image (bev=None)")
         img = np.asarray(img, dtype=np.uint8)
         if img.shape[:2] != (self.bev_size, self.bev_size):
-            # An env rendering the protocol's 800×800 BEV (same 100 m span): area-downsample.
-            from PIL import Image
-
-            img = np.asarray(
-                Image.fromarray(img).resize((self.bev_size, self.bev_size), Image.Resampling.BOX)
+            raise ConfigError(
+                f"config `bev.size_px` = {img.shape[0]}: the policy sees a {self.bev_size}×"
+                f"{self.bev_size} BEV rendered at that size (`WrapperConfig.env_config`), or pass "
+                "the env's `sim` to render it"
             )
         return img
 
-    def encode(self, obs: dict[str, Any]) -> Any:
+    def encode(self, obs: dict[str, Any], sim: Any = None) -> Any:
+        """What the policy sees of `obs`; `sim` (optional) renders the BEV (see `bev`)."""
         if self.kind == "state":
             return self.state(obs["state"])
         if self.kind == "bev":
-            return self.bev(obs)
-        return {"bev": self.bev(obs), "state": self.state(obs["state"])}
+            return self.bev(obs, sim)
+        return {"bev": self.bev(obs, sim), "state": self.state(obs["state"])}
 
 
 # -- the scenario sampler -----------------------------------------------------------------------
