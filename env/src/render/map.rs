@@ -125,6 +125,8 @@ pub struct RenderMap {
 
 const CELL_M: f32 = 32.0;
 const PIECE_M: f64 = 12.0;
+/// How far each lane's surface reaches past its edge, under its neighbour (see `from_parts`).
+const LANE_OVERLAP_M: f64 = 0.08;
 
 fn is_sidewalk(l: &Lane) -> bool {
     l.allow.contains(VClass::Pedestrian)
@@ -497,7 +499,11 @@ impl RenderMap {
                         if l.shape.len() < 2 {
                             continue;
                         }
-                        let hw = l.width_m * 0.5;
+                        // Each lane is its own strip, and neighbours' shared edges are offset from
+                        // two centrelines with their own vertices: the edges meet in T-junctions
+                        // that leave hairline cracks (a dotted seam between lanes). A small overlap
+                        // closes them; the lane line is drawn over it.
+                        let hw = l.width_m * 0.5 + LANE_OVERLAP_M;
                         let mat = if is_sidewalk(l) {
                             Mat::Sidewalk
                         } else if is_bike_only(l) {
