@@ -86,7 +86,7 @@ HEAVY_FIRST = (
     "tests/baselines/test_end_to_end.py",  # ~50: training runs
     "tests/openloop/generate/test_generate.py",  # ~45: whole generated sets
     "tests/vlm/test_transformers_serve.py",  # ~30
-    "tests/baselines/test_action_levels.py",
+    "tests/baselines/test_baselines_action_levels.py",
     "tests/vlm/test_vlm_sumo_workers.py",
     "tests/vlm/test_vlm_kill_resume.py",
     "tests/vlm/test_vlm_evaluate.py",
