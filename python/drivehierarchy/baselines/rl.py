@@ -115,13 +115,18 @@ def sumo_scenarios(paths: Sequence[str], wrapper: WrapperConfig) -> list[str]:
     return out
 
 
-def default_hyperparams(algo: str, n_envs: int) -> dict[str, Any]:
+def default_hyperparams(algo: str, n_envs: int, steps: int | None = None) -> dict[str, Any]:
     """Settings that learn on this env in minutes on 2 cores (short decision horizon, dense
-    shaped reward); any of them can be overridden from the CLI with --hp key=value."""
+    shaped reward); any of them can be overridden from the CLI with --hp key=value. A PPO budget
+    of `steps` below one default rollout gets one rollout of that size (SB3 would otherwise play a
+    whole 2,048-step rollout for `--steps 64`)."""
     if algo == "ppo":
+        n_steps = max(64, 2048 // n_envs)
+        if steps is not None and steps < n_steps * n_envs:
+            n_steps = max(8, -(-steps // n_envs))
         return {
-            "n_steps": max(64, 2048 // n_envs),
-            "batch_size": 256,
+            "n_steps": n_steps,
+            "batch_size": min(256, n_steps * n_envs),
             "n_epochs": 10,
             "learning_rate": 3e-4,
             "gamma": 0.99,
@@ -214,7 +219,7 @@ def train_rl(
             model.load_replay_buffer(str(buf))
         reset = False
     else:
-        hp = default_hyperparams(algo, n_envs)
+        hp = default_hyperparams(algo, n_envs, steps)
         hp.update(hyperparams or {})
         if init is not None:
             hp.setdefault("policy_kwargs", {})
