@@ -6,6 +6,7 @@ Also: the quick lane's skip list in `scripts/test.sh` names only tests that exis
 
 from __future__ import annotations
 
+import ast
 import os
 import re
 import shlex
@@ -93,11 +94,15 @@ def test_quick_lane_skips_only_tests_that_exist() -> None:
 def test_heavy_first_names_only_test_files_that_exist() -> None:
     """The gate's scheduling order (tests/conftest.py `HEAVY_FIRST`) names real test files: a
     renamed file would silently fall back to collection order."""
-    sys.path.insert(0, str(ROOT / "tests"))
-    try:
-        from conftest import HEAVY_FIRST
-    finally:
-        sys.path.remove(str(ROOT / "tests"))
+    # Read, not imported: under pytest the name `conftest` is whichever conftest.py loaded first.
+    tree = ast.parse((ROOT / "tests" / "conftest.py").read_text(encoding="utf-8"))
+    values = [
+        node.value
+        for node in tree.body
+        if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "HEAVY_FIRST" for t in node.targets)
+    ]
+    assert len(values) == 1, "tests/conftest.py has no HEAVY_FIRST"
+    HEAVY_FIRST = ast.literal_eval(values[0])
     assert len(set(HEAVY_FIRST)) == len(HEAVY_FIRST)
     missing = [name for name in HEAVY_FIRST if not (ROOT / name).is_file()]
     assert not missing, f"HEAVY_FIRST names no test file: {missing}"
