@@ -210,6 +210,7 @@ pub struct DecisionRecord {
     /// The control held until the next decision (plan levels: the tracker's first control).
     pub control: Control,
     /// Plan levels: the plan applied (`None` when the reply had none: the last plan was held).
+    /// In a step's `info` only for replies: an array action's plan is the action itself.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub plan: Option<Plan>,
     /// Plan levels: how well the tracker followed the plan over this decision's ticks.
@@ -582,8 +583,15 @@ impl Sim {
                 plan,
                 tracking: Some(ep.tracker.take_error()),
             };
-            ep.decision_log.push(record.clone());
-            reply = Some(record);
+            // The step's info leaves out a plan that arrived as an array: the caller holds it
+            // (and `decision_log()` keeps it), and handing 8 points to Python every decision
+            // cost more than tracking them. A reply's plan is news to the caller: it stays.
+            let mut echo = record.clone();
+            if echo.raw.is_none() {
+                echo.plan = None;
+            }
+            ep.decision_log.push(record);
+            reply = Some(echo);
         } else if !ep.terminated {
             let speed = ep.world.ego().speed_mps;
             let (control, raw, parsed, failure) = match (mode, action) {
