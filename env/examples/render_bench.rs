@@ -62,6 +62,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         color: [(i * 40 % 255) as u8, 90, 160],
                         braking: i % 3 == 0,
                         blinkers: 0,
+                        beacon: false,
                     }
                 })
                 .collect()
@@ -80,6 +81,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 color: [200, 200, 200],
                 braking: false,
                 blinkers: 0,
+                beacon: false,
             })
             .collect();
         let route: Vec<Vec<dh_env::geom::Vec2>> = poses

@@ -65,6 +65,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             color: [200, 200, 200],
             braking: false,
             blinkers: 0,
+            beacon: false,
         };
         let actors: Vec<ActorView> = (0..24u32)
             .map(|i| ActorView {
@@ -81,6 +82,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 color: [(i * 40 % 255) as u8, 90, 160],
                 braking: i % 3 == 0,
                 blinkers: 0,
+                beacon: false,
             })
             .collect();
         let lights = [TrafficLightView {

@@ -1,5 +1,6 @@
 //! The rendering gallery of docs/rendering.md: people walking and standing at 10/25/40 m, each
-//! vehicle body at 15 and 60 m, every palette colour, a curved road's markings and a signalised
+//! vehicle body at 15 and 60 m, an emergency vehicle's light bar at 15 and 60 m by day and
+//! night, every palette colour, a curved road's markings and a signalised
 //! approach's stop lines and kerbs, all on
 //! town01 through the protocol's 800×450 front camera (what a model sees, no supersampling).
 //! Next to each frame it writes a ×4 nearest-neighbour crop around the subject, so a reviewer
@@ -12,9 +13,10 @@
 mod common;
 
 use common::{frame, view, Town};
+use dh_env::conditions::{Conditions, TimeOfDay};
 use dh_env::geom::Pose;
 use dh_env::render::palette::PALETTE;
-use dh_env::render::{render_and_project, render_bev, BevConfig, CameraConfig, Image, RenderMap};
+use dh_env::render::{render_and_project, render_bev, Ambience, BevConfig, CameraConfig, Image, RenderMap};
 use dh_env::view::{ActorKind, ActorView};
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::path::PathBuf;
@@ -54,7 +56,20 @@ impl Shot<'_> {
         subject: Option<u32>,
         bev: bool,
     ) -> String {
-        let frame = frame(ego, actors, Default::default());
+        self.take_in(name, ego, actors, subject, bev, Ambience::default())
+    }
+
+    /// [`Shot::take`] under `ambience` (time of day, and the tick that sets beacon phases).
+    fn take_in(
+        &mut self,
+        name: &str,
+        ego: &ActorView,
+        actors: &[ActorView],
+        subject: Option<u32>,
+        bev: bool,
+        ambience: Ambience,
+    ) -> String {
+        let frame = frame(ego, actors, ambience);
         let mut img = Image::default();
         let found = render_and_project(self.map, &frame, &CameraConfig::front(), &mut img).unwrap();
         let file = format!("{name}.png");
@@ -141,6 +156,44 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         (o.length_m, o.width_m, o.height_m) = (l, w, h);
         let far = shot.take(&format!("{name}_60m"), &ego, &[o], Some(8), false);
         shot.md.push(format!("| {name} | {near} | {far} |"));
+    }
+
+    // Emergency vehicles (`emergency = true`): the white truck of the suite's emergency
+    // scenarios and a sedan, ahead at 15 m and oncoming at 60 m, at noon and at night. Tick 0
+    // shows the red half bright, tick 5 (a decision later) the blue half.
+    shot.md.push(
+        "\n### Emergency vehicles\n\n| vehicle, time | 15 m, ahead (tick 0: red bright) | 60 m, oncoming (tick 5: blue bright) |\n|---|---|---|"
+            .into(),
+    );
+    let emergency: [Body; 2] = [
+        ("emergency_truck", ActorKind::Truck, 6.5, 2.5, 3.4, [245, 245, 245]),
+        ("emergency_sedan", ActorKind::Car, 4.8, 1.85, 1.5, [245, 245, 245]),
+    ];
+    for (name, kind, l, w, h, col) in emergency {
+        for (time, tod) in [("noon", TimeOfDay::Noon), ("night", TimeOfDay::Night)] {
+            let conditions = Conditions { time_of_day: tod, ..Default::default() };
+            let mut v = view(10, kind, at(15.0 + l * 0.5, -0.6, 0.25), col);
+            (v.length_m, v.width_m, v.height_m, v.beacon) = (l, w, h, true);
+            let near = shot.take_in(
+                &format!("{name}_15m_{time}"),
+                &ego,
+                &[v],
+                Some(10),
+                kind == ActorKind::Truck && tod == TimeOfDay::Noon,
+                Ambience { conditions, seed: 0, tick: 0 },
+            );
+            let mut o = view(11, kind, at(60.0, 3.3, PI), col);
+            (o.length_m, o.width_m, o.height_m, o.beacon) = (l, w, h, true);
+            let far = shot.take_in(
+                &format!("{name}_60m_{time}"),
+                &ego,
+                &[o],
+                Some(11),
+                false,
+                Ambience { conditions, seed: 0, tick: 5 },
+            );
+            shot.md.push(format!("| {name}, {time} | {near} | {far} |"));
+        }
     }
 
     // Every palette colour on a sedan at 12 m, rear three-quarter view.

@@ -20,6 +20,7 @@ fn actor(id: u32, kind: ActorKind, pose: Pose, color: [u8; 3], braking: bool) ->
         color,
         braking,
         blinkers: 0,
+        beacon: false,
     }
 }
 

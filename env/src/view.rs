@@ -62,6 +62,10 @@ pub struct ActorView {
     /// Turn indicators lit: [`BLINKER_RIGHT`] | [`BLINKER_LEFT`] (both = hazard lights).
     #[serde(default)]
     pub blinkers: u8,
+    /// Emergency beacons flashing (the scenario's `emergency = true`, or a SUMO `emergency`
+    /// vClass). Drawn only; no dynamics read it.
+    #[serde(default)]
+    pub beacon: bool,
 }
 
 /// [`ActorView::blinkers`] bits.

@@ -82,6 +82,7 @@ class ActorView(TypedDict):
     color: list[int]
     braking: bool
     blinkers: int
+    beacon: bool
     motion: str
 
 

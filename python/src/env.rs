@@ -424,7 +424,8 @@ impl PySim {
 
     /// Active actors (ego excluded, sorted by id) with what `actors_array` leaves out: one dict
     /// each of id, kind, x, y, yaw, speed_mps, length_m, width_m, height_m, color (sRGB),
-    /// braking, blinkers, motion (`static`/`scripted`/`external`/`traffic`).
+    /// braking, blinkers, beacon (emergency lights flashing), motion
+    /// (`static`/`scripted`/`external`/`traffic`).
     fn actor_views<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
         let world = self.inner.world().map_err(|e| err(py, e))?;
         let out = PyList::empty(py);
@@ -444,6 +445,7 @@ impl PySim {
             d.set_item("color", a.color.map(u32::from).to_vec())?;
             d.set_item("braking", a.braking)?;
             d.set_item("blinkers", a.blinkers)?;
+            d.set_item("beacon", a.beacon)?;
             d.set_item("motion", world.actor_motion(a.id).unwrap_or("unknown"))?;
             out.append(d)?;
         }

@@ -138,6 +138,9 @@ def _edits() -> list[tuple[str, Any, str]]:
     def bad_color(d: dict[str, Any]) -> None:
         d["actors"][0]["color"] = [300, 0, 0]
 
+    def emergency_not_bool(d: dict[str, Any]) -> None:
+        d["actors"][0]["emergency"] = "yes"
+
     def bad_flow(d: dict[str, Any]) -> None:
         d["traffic"] = {"flows": [{"from": "a", "to": "b", "vehs_per_hour": 5, "probability": 0.1}]}
 
@@ -170,6 +173,7 @@ def _edits() -> list[tuple[str, Any, str]]:
         ("unknown nested key", unknown_nested, "actors.0.brake: Additional properties"),
         ("wrong type", wrong_type, "actors.0.speed_mps: 'fast' is not of type"),
         ("unknown kind", wrong_kind, "actors.1.kind: 'tank'"),
+        ("emergency not a bool", emergency_not_bool, "actors.0.emergency: "),
         ("missing required key", missing_required, ": 'map' is a required property"),
         ("place by lane and x", place_both_forms, "ego.start: "),
         ("place with x only", place_half_xy, "ego.destination: "),
@@ -196,6 +200,7 @@ def test_schema_accepts_the_new_features(schema: dict[str, Any]) -> None:
     d["actors"][0]["start"] = {"ego_eta_s": 3.0, "of": [200.0, -4.8]}
     d["actors"][1]["start"] = {"after": "actors[0]", "delay_s": 1.0, "event": "brake"}
     d["actors"][1]["lane_changes"] = [{"at_s": 40.0, "to_lane": "C2T_1", "length_m": 20.0}]
+    d["actors"][0]["emergency"] = True
     d["lights"] = [
         {"tls": "C", "start_phase": 3, "phase_elapsed_s": 5.0},
         {"tls": "D", "phases": [{"state": "GGrr", "duration_s": 30.0}], "offset_s": 2.0},

@@ -55,6 +55,7 @@ pub fn view(id: u32, kind: ActorKind, pose: Pose, color: [u8; 3]) -> ActorView {
         color,
         braking: false,
         blinkers: 0,
+        beacon: false,
     }
 }
 

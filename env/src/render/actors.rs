@@ -36,8 +36,16 @@ fn lights(m: &mut Mesh, fr: &Frame, hl: f32, hw: f32, z: f32, braking: bool, bli
 }
 
 /// Appends the triangles of one actor; `detail` = near the camera (rounder wheels); `lit` =
-/// its lamps burn (night).
-pub(crate) fn actor(out: &mut Vec<Tri3>, a: &ActorView, origin: Vec2, id: u32, detail: bool, lit: bool) {
+/// its lamps burn (night); `tick` = the world tick (the phase of flashing beacons).
+pub(crate) fn actor(
+    out: &mut Vec<Tri3>,
+    a: &ActorView,
+    origin: Vec2,
+    id: u32,
+    detail: bool,
+    lit: bool,
+    tick: u64,
+) {
     let fr = Frame::new(a.pose.pos, a.pose.yaw, origin, 0.0);
     let (l, w, h) = actor_dims(a);
     let (hl, hw) = (l * 0.5, w * 0.5);
@@ -45,7 +53,7 @@ pub(crate) fn actor(out: &mut Vec<Tri3>, a: &ActorView, origin: Vec2, id: u32, d
     let mut m = Mesh { out, id, paint: Some(a.color), lit };
     match a.kind {
         ActorKind::Car | ActorKind::Bus | ActorKind::Truck => {
-            super::vehicles::vehicle(&mut m, &fr, a, l, w, h, detail);
+            super::vehicles::vehicle(&mut m, &fr, a, l, w, h, detail, tick);
         }
         ActorKind::Cyclist => super::people::cyclist(&mut m, &fr, a, l, h),
         ActorKind::Pedestrian => super::people::pedestrian(&mut m, &fr, a, h),

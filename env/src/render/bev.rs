@@ -14,6 +14,7 @@ use super::image::Image;
 use super::map::{Mat, RenderMap, N_LAYERS, N_MATS};
 use super::mesh::actor_dims;
 use super::raster::{Planes, RasterBackend, SV};
+use super::vehicles::{BEACON_BLUE, BEACON_BLUE_DIM, BEACON_RED, BEACON_RED_DIM};
 use crate::error::{Error, Result};
 use crate::geom::Vec2;
 use crate::view::{ActorKind, LightColor};
@@ -251,6 +252,16 @@ impl Renderer {
                     ],
                     [245, 245, 245],
                 );
+            }
+            if a.beacon {
+                // The light bar: a red (left) and a blue (right) half across the middle, the
+                // bright one swapping with the camera's (`vehicles::beacon_red_lit`).
+                let red_lit = super::vehicles::beacon_red_lit(frame.ambience.tick);
+                let (red, blue) =
+                    if red_lit { (BEACON_RED, BEACON_BLUE_DIM) } else { (BEACON_RED_DIM, BEACON_BLUE) };
+                let (d, q) = ((0.3f32).max(1.5 / v.s).min(hl), hw * 0.85);
+                b.fill_convex(&[corner(d, q), corner(-d, q), corner(-d, 0.0), corner(d, 0.0)], red);
+                b.fill_convex(&[corner(d, 0.0), corner(-d, 0.0), corner(-d, -q), corner(d, -q)], blue);
             }
         }
         // Route overlay: polyline from the ego centre through the slice vertices, a dot on every

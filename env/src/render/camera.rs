@@ -375,7 +375,7 @@ pub(crate) fn dynamic_tris(
     out: &mut Vec<Tri3>,
 ) {
     if draw_ego {
-        super::actors::actor(out, frame.ego, map.origin, u32::MAX, true, lit);
+        super::actors::actor(out, frame.ego, map.origin, u32::MAX, true, lit, frame.ambience.tick);
     }
     for (i, a) in frame.actors.iter().enumerate() {
         if a.id == frame.ego.id && a.pose == frame.ego.pose {
@@ -385,7 +385,7 @@ pub(crate) fn dynamic_tris(
             continue;
         }
         let near = a.pose.pos.dist(frame.ego.pose.pos) < DETAIL_M;
-        super::actors::actor(out, a, map.origin, i as u32 + 1, near, lit);
+        super::actors::actor(out, a, map.origin, i as u32 + 1, near, lit, frame.ambience.tick);
     }
     for l in frame.lights {
         let place = map.signal_places.get(&l.lane_id);
@@ -625,6 +625,7 @@ impl Renderer {
                 stamp,
                 a.pose.pos.dist(frame.ego.pose.pos) < DETAIL_M,
                 frame.ambience.conditions.time_of_day == crate::conditions::TimeOfDay::Night,
+                frame.ambience.tick,
             );
             let mut total = 0usize;
             // Projected area of the whole silhouette and of its part inside the image (faces

@@ -42,6 +42,7 @@ fn view(kind: ActorKind, rgb: [u8; 3], yaw: f64, (l, w, h): (f64, f64, f64)) -> 
         color: rgb,
         braking: false,
         blinkers: 0,
+        beacon: false,
     }
 }
 
@@ -77,6 +78,7 @@ fn sunlit_paint_stays_in_its_name_range() {
                     1,
                     true,
                     false,
+                    0,
                 );
                 let mut lit = 0;
                 for t in tris.iter().filter(|t| t.id & PAINT_BIT != 0 && dot(t.n, sun) >= LIT_MIN_COS) {

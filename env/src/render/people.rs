@@ -319,6 +319,7 @@ mod tests {
             color: [200, 30, 30],
             braking: false,
             blinkers: 0,
+            beacon: false,
         };
         let n = (0..4000).filter(|&i| in_wheelchair(&view(i), 1.75)).count();
         let want = 4000 / WHEELCHAIR_ONE_IN as usize;

@@ -117,6 +117,7 @@ fn car(id: u32, pose: Pose, color: [u8; 3]) -> ActorView {
         color,
         braking: false,
         blinkers: 0,
+        beacon: false,
     }
 }
 

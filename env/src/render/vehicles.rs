@@ -1,5 +1,6 @@
 //! Vehicle meshes: a low-poly body per type (sedan, SUV, van, bus, truck), glazing, round
-//! wheels, head and tail lamps, brake lamps and indicators from the view's state.
+//! wheels, head and tail lamps, brake lamps and indicators from the view's state, and the
+//! emergency light bar of a vehicle whose beacons flash.
 //!
 //! Body paint is the actor's colour unscaled on every panel, so lighting alone decides how it
 //! reads (see `palette`). The body type of a car follows its size: the scenario format and
@@ -20,6 +21,20 @@ const HEADLAMP_LIT: [u8; 3] = [255, 252, 235];
 const TAIL_LIT: [u8; 3] = [205, 22, 22];
 const BRAKE_ON: [u8; 3] = [255, 36, 30];
 const PLATE: [u8; 3] = [225, 225, 215];
+pub(crate) const BEACON_RED: [u8; 3] = [255, 28, 28];
+pub(crate) const BEACON_RED_DIM: [u8; 3] = [118, 24, 28];
+pub(crate) const BEACON_BLUE: [u8; 3] = [40, 105, 255];
+pub(crate) const BEACON_BLUE_DIM: [u8; 3] = [26, 42, 118];
+/// Beacons swap every 0.25 s (5 ticks of `DT_S`), a 2 Hz flash. A decision comes every
+/// `DECISION_INTERVAL_TICKS` = 5 ticks, so consecutive decisions see the two halves swapped.
+pub(crate) const BEACON_HALF_PERIOD_TICKS: u64 = 5;
+const _: () = assert!(BEACON_HALF_PERIOD_TICKS as f64 * crate::DT_S == 0.25);
+
+/// Whether the red half of a light bar is the bright one at world tick `tick` (the blue half
+/// is bright otherwise): a pure function of sim time, so frames stay byte-identical.
+pub(crate) fn beacon_red_lit(tick: u64) -> bool {
+    (tick / BEACON_HALF_PERIOD_TICKS) % 2 == 0
+}
 
 /// What a vehicle looks like.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -108,6 +123,33 @@ fn lamps(m: &mut Mesh, fr: &Frame, front: f32, rear: f32, z: f32, hw_lamp: f32, 
     }
 }
 
+/// Centre of a rear light bar ahead of the rear face: its lamps end flush with that face, so a
+/// camera below a tall roof still sees them from behind.
+const REAR_BAR: f32 = 0.15;
+
+/// A light bar across the roof at (`fwd`, `z`), `half_across` wide each side: a dark base, the
+/// red half on the vehicle's left and the blue half on its right. The bright half is emissive
+/// (it reads at noon and glows at night); the dim one is a lit, unlit-lamp red or blue.
+fn light_bar(m: &mut Mesh, fr: &Frame, fwd: f32, z: f32, half_across: f32, tick: u64) {
+    let (hd, hh) = (0.15f32, 0.085f32);
+    m.bx(fr, fwd, 0.0, z, z + 0.04, hd + 0.02, half_across + 0.02, &all(TRIM));
+    let red_lit = beacon_red_lit(tick);
+    let q = half_across * 0.5;
+    for (left, lit, on, dim) in
+        [(q, red_lit, BEACON_RED, BEACON_RED_DIM), (-q, !red_lit, BEACON_BLUE, BEACON_BLUE_DIM)]
+    {
+        let start = m.out.len();
+        let col = if lit { on } else { dim };
+        m.bx(fr, fwd, left, z + 0.04, z + 0.04 + 2.0 * hh, hd, q - 0.015, &all(col));
+        if lit {
+            for t in &mut m.out[start..] {
+                t.col = on;
+                t.emissive = true;
+            }
+        }
+    }
+}
+
 fn wheels(m: &mut Mesh, fr: &Frame, hw: f32, r: f32, axles: &[f32], n: usize) {
     for &x in axles {
         for side in [-1.0f32, 1.0] {
@@ -116,8 +158,19 @@ fn wheels(m: &mut Mesh, fr: &Frame, hw: f32, r: f32, axles: &[f32], n: usize) {
     }
 }
 
-/// Appends one vehicle (car, bus or truck) of length `l`, width `w`, height `h`.
-pub(crate) fn vehicle(m: &mut Mesh, fr: &Frame, a: &ActorView, l: f32, w: f32, h: f32, detail: bool) {
+/// Appends one vehicle (car, bus or truck) of length `l`, width `w`, height `h`; `tick` (the
+/// world tick) sets the phase of its beacons, if they flash.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn vehicle(
+    m: &mut Mesh,
+    fr: &Frame,
+    a: &ActorView,
+    l: f32,
+    w: f32,
+    h: f32,
+    detail: bool,
+    tick: u64,
+) {
     let (hl, hw) = (l * 0.5, w * 0.5);
     let col = a.color;
     let n = if detail { 10 } else { 5 };
@@ -139,6 +192,9 @@ pub(crate) fn vehicle(m: &mut Mesh, fr: &Frame, a: &ActorView, l: f32, w: f32, h
             };
             let cab = [col, col, GLASS, GLASS, GLASS, GLASS];
             m.tbox(fr, -0.06 * hl, 0.0, zb, h, cb, ct, &cab);
+            if a.beacon {
+                light_bar(m, fr, -0.06 * hl + (ct[0] - ct[1]) * 0.5, h, ct[2] - 0.04, tick);
+            }
             // Grille and number plates.
             m.panel(fr, hl + 0.01, 0.0, zb - 0.2, hw * 0.42, 0.07, 1.0, TRIM, false);
             m.panel(fr, -hl - 0.01, 0.0, z0 + 0.14, 0.24, 0.055, -1.0, PLATE, false);
@@ -167,6 +223,10 @@ pub(crate) fn vehicle(m: &mut Mesh, fr: &Frame, a: &ActorView, l: f32, w: f32, h
                 [hl - nose * 1.5, hl, hw - 0.06],
                 &[col, col, GLASS, col, col, col],
             );
+            if a.beacon {
+                light_bar(m, fr, hl - nose * 1.5 - 0.3, h, hw - 0.16, tick);
+                light_bar(m, fr, REAR_BAR - hl, h, hw - 0.16, tick);
+            }
             // Cab side windows over the front door, both sides.
             let (f1, f0) = (hl - nose * 0.9, hl - nose * 0.9 - 0.75);
             for side in [-1.0f32, 1.0] {
@@ -184,6 +244,10 @@ pub(crate) fn vehicle(m: &mut Mesh, fr: &Frame, a: &ActorView, l: f32, w: f32, h
             // Window band round the bus, a roof band above it.
             m.bx(fr, 0.0, 0.0, zb, h * 0.86, hl - 0.02, hw - 0.02, &[col, col, GLASS, GLASS, GLASS, GLASS]);
             m.bx(fr, 0.0, 0.0, h * 0.86, h, hl, hw, &all(col));
+            if a.beacon {
+                light_bar(m, fr, hl - 1.0, h, hw - 0.2, tick);
+                light_bar(m, fr, REAR_BAR - hl, h, hw - 0.2, tick);
+            }
             // Pillars every 2 m break the glazing into windows; the front door on the right.
             let k = ((l - 2.0) / 2.0).floor().max(1.0) as usize;
             for i in 0..=k {
@@ -219,6 +283,11 @@ pub(crate) fn vehicle(m: &mut Mesh, fr: &Frame, a: &ActorView, l: f32, w: f32, h
             let box_c = -hl + box_l * 0.5;
             m.bx(fr, box_c, 0.0, r * 0.7, r * 1.45, box_l * 0.5, hw * 0.55, &all(TRIM));
             m.bx(fr, box_c, 0.0, r * 1.45, h, box_l * 0.5, hw, &all(col));
+            // On the box roof just behind the cab, the highest surface, and at its rear edge.
+            if a.beacon {
+                light_bar(m, fr, box_c + box_l * 0.5 - 0.3, h, hw - 0.15, tick);
+                light_bar(m, fr, REAR_BAR - hl, h, hw - 0.15, tick);
+            }
             lamps(m, fr, hl, -hl, r * 1.3, hw - 0.3, 0.14, a);
         }
     }

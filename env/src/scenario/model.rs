@@ -202,6 +202,8 @@ pub struct ResolvedActor {
     pub width_m: f64,
     pub height_m: f64,
     pub color: [u8; 3],
+    /// Emergency beacons (rendering only).
+    pub emergency: bool,
     pub motion: ActorMotion,
 }
 

@@ -118,6 +118,10 @@ pub struct ObstacleSpec {
     pub height_m: Option<f64>,
     #[serde(default)]
     pub color: Option<[u8; 3]>,
+    /// An emergency vehicle (car, bus or truck): a light bar on its roof flashes red and blue.
+    /// It changes only the picture; the actor still moves as scripted.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub emergency: bool,
 }
 
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
@@ -430,6 +434,10 @@ pub struct ActorSpec {
     pub height_m: Option<f64>,
     #[serde(default)]
     pub color: Option<[u8; 3]>,
+    /// An emergency vehicle (car, bus or truck): a light bar on its roof flashes red and blue.
+    /// It changes only the picture; the actor still moves as scripted.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub emergency: bool,
     /// Lane changes / cut-ins of a `route` actor, in path order.
     #[serde(default)]
     pub lane_changes: Vec<LaneChangeSpec>,

@@ -14,7 +14,7 @@
 use super::lights::LightState;
 use super::traffic::{TrafficAgent, TrafficFrame, TrafficInput, TrafficModel, SIGNAL_BRAKELIGHT};
 use crate::geom::{Obb, Polyline, Pose, Vec2};
-use crate::map::{EdgeFunction, JunctionIdx, LaneIdx, Network};
+use crate::map::{EdgeFunction, JunctionIdx, LaneIdx, Network, VClass};
 use crate::scenario::traffic::{DemandVehicle, FlowRate, LaneChoice, SpeedChoice, SplitMix, TrafficDemand};
 use crate::scenario::{ResolvedScenario, PALETTE};
 use crate::view::LightColor;
@@ -466,6 +466,7 @@ impl IdmTraffic {
                 width_m: t.width_m,
                 height_m: t.height_m,
                 color: t.color.unwrap_or(PALETTE[me.key as usize % PALETTE.len()]),
+                emergency: t.vclass == VClass::Emergency,
                 pose: me.pose,
                 speed_mps: me.v,
                 signals: if me.braking { SIGNAL_BRAKELIGHT } else { 0 },

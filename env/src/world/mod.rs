@@ -167,6 +167,7 @@ impl World {
             color: scenario.ego.color,
             braking: false,
             blinkers: 0,
+            beacon: false,
         };
         let mut collision = CollisionWorld::new(ego.pose.pos, ego.pose, params.length_m, params.width_m);
         let mut actors = Vec::with_capacity(scenario.actors.len());
@@ -190,6 +191,7 @@ impl World {
                 color: a.color,
                 braking: false,
                 blinkers: 0,
+                beacon: a.emergency,
             };
             let brake_pending = matches!(&motion, Motion::Scripted(p) if p.brake.is_some());
             let collider = collision.add_actor(id, pose, a.length_m, a.width_m);
@@ -567,6 +569,7 @@ impl World {
             color,
             braking: false,
             blinkers: 0,
+            beacon: false,
         };
         self.push_driven_actor(view, Motion::External, 0, 0);
         self.views.push(view);
@@ -685,6 +688,7 @@ impl World {
                         color: a.color,
                         braking: a.signals & traffic::SIGNAL_BRAKELIGHT != 0,
                         blinkers: traffic::blinkers(a.signals),
+                        beacon: a.emergency,
                     };
                     self.push_driven_actor(view, Motion::Traffic(a.key), gen, a.signals);
                     self.traffic_ids.insert(a.key, id);

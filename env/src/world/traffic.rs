@@ -45,6 +45,8 @@ pub struct TrafficAgent {
     pub width_m: f64,
     pub height_m: f64,
     pub color: [u8; 3],
+    /// Emergency beacons flashing (SUMO vClass `emergency`); drawn only.
+    pub emergency: bool,
     /// Centre and heading.
     pub pose: Pose,
     pub speed_mps: f64,

@@ -41,6 +41,7 @@ fn actor(id: u32, kind: ActorKind, fwd: f64, left: f64) -> ActorView {
         color: [40, 90, 200],
         braking: false,
         blinkers: 0,
+        beacon: false,
     }
 }
 
@@ -56,6 +57,7 @@ fn ego() -> ActorView {
         color: [200, 200, 200],
         braking: false,
         blinkers: 0,
+        beacon: false,
     }
 }
 
@@ -374,4 +376,119 @@ fn lit_indicators_show_on_their_side() {
     assert!(r > 4 && l == 0, "right indicator: {l} left / {r} right amber pixels");
     let (l, r) = amber(dh_env::view::BLINKER_LEFT | dh_env::view::BLINKER_RIGHT);
     assert!(l > 4 && r > 4, "hazard lights: {l} / {r}");
+}
+
+/// Pixels of the bright beacon red and blue in `img` within `bbox`: (red count, red mean x,
+/// blue count, blue mean x).
+fn beacon_pixels(img: &Image, bbox: [f32; 4]) -> (usize, f32, usize, f32) {
+    let (mut nr, mut xr, mut nb, mut xb) = (0usize, 0.0f32, 0usize, 0.0f32);
+    for y in bbox[1] as u32..(bbox[3] as u32).min(img.height) {
+        for x in bbox[0] as u32..(bbox[2] as u32).min(img.width) {
+            let [r, g, b] = img.pixel(x, y).unwrap();
+            if r >= 215 && g <= 60 && b <= 60 {
+                nr += 1;
+                xr += x as f32;
+            } else if b >= 215 && r <= 70 && (70..=140).contains(&g) {
+                nb += 1;
+                xb += x as f32;
+            }
+        }
+    }
+    (nr, xr / nr.max(1) as f32, nb, xb / nb.max(1) as f32)
+}
+
+/// An emergency vehicle's light bar shows its bright half in red or blue, the two swapping
+/// every 5 ticks (2 Hz), on the vehicle's left (red) and right (blue); an unflagged vehicle of
+/// the same colour shows neither, and a frame is the same bytes for the same tick.
+#[test]
+fn emergency_light_bar_flashes_red_and_blue_on_flagged_vehicles_only() {
+    let (_, map) = world();
+    let e = ego();
+    let cfg = CameraConfig::front();
+    let ambience = |tick: u64, night: bool| dh_env::render::Ambience {
+        conditions: dh_env::conditions::Conditions {
+            time_of_day: if night {
+                dh_env::conditions::TimeOfDay::Night
+            } else {
+                dh_env::conditions::TimeOfDay::Noon
+            },
+            ..Default::default()
+        },
+        seed: 7,
+        tick,
+    };
+    let vehicles = [
+        (ActorKind::Car, 14.0, 0.0),
+        (ActorKind::Truck, 16.0, 0.0),
+        (ActorKind::Bus, 18.0, 0.0),
+        // Facing the camera: its left is the image's right.
+        (ActorKind::Truck, 30.0, 3.5),
+    ];
+    for (k, (kind, fwd, left)) in vehicles.into_iter().enumerate() {
+        let facing = k == 3;
+        let mut v = actor(1, kind, fwd, left);
+        v.color = [245, 245, 245];
+        if facing {
+            v.pose.yaw += std::f64::consts::PI;
+        }
+        let render = |beacon: bool, tick: u64, night: bool| {
+            let actors = [ActorView { beacon, ..v }];
+            let f = FrameInput { ambience: ambience(tick, night), ..frame(&e, &actors, &[], &[]) };
+            let mut img = Image::default();
+            render_camera(map, &f, &cfg, &mut img).unwrap();
+            let p = project_actors(map, &f, &cfg).unwrap();
+            (img, p[0].bbox_px)
+        };
+        for night in [false, true] {
+            let (plain, bbox) = render(false, 0, night);
+            let (nr, _, nb, _) = beacon_pixels(&plain, bbox);
+            assert_eq!((nr, nb), (0, 0), "{kind:?} #{k} without beacons (night {night})");
+            let (red, bbox) = render(true, 0, night);
+            let (nr, xr, nb, _) = beacon_pixels(&red, bbox);
+            assert!(nr >= 6 && nb == 0, "{kind:?} #{k} tick 0 (night {night}): {nr} red, {nb} blue");
+            let (blue, bbox) = render(true, 5, night);
+            let (nr2, _, nb2, xb) = beacon_pixels(&blue, bbox);
+            assert!(nb2 >= 6 && nr2 == 0, "{kind:?} #{k} tick 5 (night {night}): {nr2} red, {nb2} blue");
+            // Red on the vehicle's left: the image's left seen from behind, its right head-on.
+            assert_eq!(xr > xb, facing, "{kind:?} #{k}: red at x {xr}, blue at x {xb}");
+            // The phase is a pure function of the tick: the same frame within a half period
+            // and one period later, and the same bytes on a fresh renderer.
+            assert_eq!(render(true, 4, night).0.data, red.data);
+            assert_eq!(render(true, 10, night).0.data, red.data);
+            assert_eq!(render(true, 15, night).0.data, blue.data);
+            assert_ne!(red.data, blue.data);
+            let actors = [ActorView { beacon: true, ..v }];
+            let f = FrameInput { ambience: ambience(0, night), ..frame(&e, &actors, &[], &[]) };
+            let mut fresh = Image::default();
+            Renderer::new().render_camera(map, &f, &cfg, &mut fresh).unwrap();
+            assert_eq!(fresh.data, red.data);
+        }
+    }
+}
+
+/// The BEV marks an emergency vehicle with a red and a blue half, the bright one swapping
+/// with the camera's; an unflagged one has neither colour.
+#[test]
+fn emergency_mark_on_the_bev() {
+    let (_, map) = world();
+    let e = ego();
+    let mut v = actor(1, ActorKind::Truck, 12.0, 0.0);
+    v.color = [245, 245, 245];
+    let count = |beacon: bool, tick: u64| {
+        let actors = [ActorView { beacon, ..v }];
+        let f = FrameInput {
+            ambience: dh_env::render::Ambience { tick, ..Default::default() },
+            ..frame(&e, &actors, &[], &[])
+        };
+        let mut img = Image::default();
+        render_bev(map, &f, &BevConfig::rl(), &mut img).unwrap();
+        let n = img.width as f32;
+        beacon_pixels(&img, [0.0, 0.0, n, img.height as f32])
+    };
+    let (nr, _, nb, _) = count(false, 0);
+    assert_eq!((nr, nb), (0, 0));
+    let (nr, _, nb, _) = count(true, 0);
+    assert!(nr > 0 && nb == 0, "{nr} red, {nb} blue");
+    let (nr, _, nb, _) = count(true, 5);
+    assert!(nb > 0 && nr == 0, "{nr} red, {nb} blue");
 }

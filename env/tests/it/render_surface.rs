@@ -23,6 +23,7 @@ fn ego(pose: Pose) -> ActorView {
         color: [200, 200, 200],
         braking: false,
         blinkers: 0,
+        beacon: false,
     }
 }
 

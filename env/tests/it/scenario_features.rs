@@ -551,3 +551,72 @@ depart_speed = 10.0
     let (x, v) = x_after(&red, 30);
     assert!(x < -10.4 && x > -25.0 && v < 0.1, "waits at the stop line (x = −10.4): x = {x}, v = {v}");
 }
+
+/// `emergency = true` reaches the actor's view as `beacon` (actors and obstacles) and changes
+/// nothing else: the same episode with and without it has identical poses and speeds.
+#[test]
+fn emergency_flag_reaches_the_view_and_not_the_dynamics() {
+    let body = |flag: &str| {
+        format!(
+            r#"
+[[actors]]
+name = "ambulance"
+kind = "truck"
+{flag}
+waypoints = [{{ x = 150.0, y = -4.8 }}, {{ x = 250.0, y = -4.8 }}]
+speed_mps = 9.0
+start = {{ ego_eta_s = 3.0, of = [200.0, -4.8] }}
+
+[[obstacles]]
+name = "parked police car"
+kind = "car"
+at = {{ x = 260.0, y = -9.5 }}
+{flag}
+"#
+        )
+    };
+    let plain = load("emergency_off", 8.0, &body(""));
+    let flagged = load("emergency_on", 8.0, &body("emergency = true"));
+    assert!(plain.actors.iter().all(|a| !a.emergency));
+    assert!(flagged.actors.iter().all(|a| a.emergency));
+    let (mut a, mut b) = (World::new(&plain, 3).unwrap(), World::new(&flagged, 3).unwrap());
+    let mut moved = false;
+    for _ in 0..400 {
+        let (ca, cb) = (cruise(&a, 8.0), cruise(&b, 8.0));
+        a.tick(&ca).unwrap();
+        b.tick(&cb).unwrap();
+        assert_eq!(a.ego(), b.ego());
+        assert_eq!(a.actors().len(), b.actors().len());
+        for (x, y) in a.actors().iter().zip(b.actors()) {
+            assert!(!x.beacon && y.beacon, "{x:?} / {y:?}");
+            assert_eq!(*x, dh_env::view::ActorView { beacon: false, ..*y });
+            moved |= y.speed_mps > 1.0;
+        }
+    }
+    assert!(moved, "the ambulance never started");
+}
+
+#[test]
+fn emergency_on_a_kind_without_a_roof_is_rejected() {
+    let e = load_err(
+        "emergency_walker",
+        r#"
+[[actors]]
+name = "a"
+kind = "pedestrian"
+emergency = true
+waypoints = [{ x = 300.0, y = -9.0 }, { x = 300.0, y = -8.5 }]
+"#,
+    );
+    assert!(e.contains("actors[0].emergency") && e.contains("pedestrian"), "{e}");
+    let e = load_err(
+        "emergency_cone",
+        r#"
+[[obstacles]]
+kind = "cone"
+at = { x = 260.0, y = -9.5 }
+emergency = true
+"#,
+    );
+    assert!(e.contains("obstacles[0].emergency") && e.contains("cone"), "{e}");
+}

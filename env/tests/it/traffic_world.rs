@@ -54,6 +54,7 @@ fn agent(key: u64, x: f64, y: f64, speed: f64, signals: u32) -> TrafficAgent {
         width_m: 1.9,
         height_m: 1.5,
         color: [1, 2, 3],
+        emergency: false,
         pose: Pose::new(Vec2::new(x, y), 0.0),
         speed_mps: speed,
         signals,

@@ -50,6 +50,7 @@ def test_actor_views_carry_class_colour_and_motion(env) -> None:
         "parked",
     )
     assert {v["kind"] for v in views.values()} >= {"bus", "pedestrian"}
+    assert not any(v["beacon"] for v in views.values())  # no emergency vehicle in this scene
     assert sim.time_s == pytest.approx(0.05 * (4 + 60 * 5))
 
 

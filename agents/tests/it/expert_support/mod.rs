@@ -34,6 +34,7 @@ pub fn actor(
         color: [200, 200, 200],
         braking: false,
         blinkers: 0,
+        beacon: false,
     }
 }
 

@@ -113,6 +113,7 @@ pub(super) fn resolve_actor(
     let (length_m, width_m, height_m) = size(ctx, &field, a.kind, a.length_m, a.width_m, a.height_m)?;
     let color = a.color.unwrap_or(default_color(a.kind, i));
     let name = a.name.clone().unwrap_or_else(|| field.clone());
+    let emergency = emergency(ctx, &field, a.kind, a.emergency)?;
     let base = |motion| ResolvedActor {
         name: name.clone(),
         kind: a.kind,
@@ -120,6 +121,7 @@ pub(super) fn resolve_actor(
         width_m,
         height_m,
         color,
+        emergency,
         motion,
     };
     if a.behavior == BehaviorSpec::External {
@@ -285,6 +287,22 @@ pub(super) fn resolve_actor(
     })))
 }
 
+/// `emergency = true` is a roof light bar, so only vehicles with a roof take it.
+fn emergency(ctx: &Ctx<'_>, field: &str, kind: ActorKind, emergency: bool) -> Result<bool> {
+    if emergency && !matches!(kind, ActorKind::Car | ActorKind::Bus | ActorKind::Truck) {
+        let kind = serde_json::to_value(kind).ok().and_then(|v| v.as_str().map(str::to_owned));
+        return Err(ctx.err(
+            format!("{field}.emergency"),
+            "true",
+            format!(
+                "only a car, bus or truck can be an emergency vehicle, not a {}",
+                kind.unwrap_or_default()
+            ),
+        ));
+    }
+    Ok(emergency)
+}
+
 pub(super) fn resolve_obstacle(
     ctx: &Ctx<'_>,
     i: usize,
@@ -294,6 +312,7 @@ pub(super) fn resolve_obstacle(
     let field = format!("obstacles[{i}]");
     let (length_m, width_m, height_m) = size(ctx, &field, o.kind, o.length_m, o.width_m, o.height_m)?;
     let (pose, _) = ctx.place(&format!("{field}.at"), &o.at)?;
+    let emergency = emergency(ctx, &field, o.kind, o.emergency)?;
     Ok(ResolvedActor {
         name: o.name.clone().unwrap_or(field),
         kind: o.kind,
@@ -301,6 +320,7 @@ pub(super) fn resolve_obstacle(
         width_m,
         height_m,
         color: o.color.unwrap_or(default_color(o.kind, palette_index)),
+        emergency,
         motion: ActorMotion::Static { pose },
     })
 }

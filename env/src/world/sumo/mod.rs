@@ -61,6 +61,8 @@ pub struct Static {
     pub width_m: f64,
     pub height_m: f64,
     pub color: [u8; 3],
+    /// SUMO vClass `emergency`: its beacons flash in the pictures.
+    pub emergency: bool,
 }
 
 impl Static {
@@ -73,7 +75,8 @@ impl Static {
         } else {
             PALETTE[key as usize % PALETTE.len()]
         };
-        Static { key, kind, length_m: t.length_m, width_m: t.width_m, height_m: t.height_m, color }
+        let emergency = t.vclass == "emergency";
+        Static { key, kind, length_m: t.length_m, width_m: t.width_m, height_m: t.height_m, color, emergency }
     }
 
     /// The world's agent from SUMO's front-bumper position and SUMO angle (degrees, clockwise
@@ -89,6 +92,7 @@ impl Static {
             width_m: self.width_m,
             height_m: self.height_m,
             color: self.color,
+            emergency: self.emergency,
             pose: Pose::new(centre, crate::geom::wrap_angle(yaw)),
             speed_mps: v.speed.max(0.0),
             signals: v.signals.max(0) as u32,

@@ -772,6 +772,15 @@ function cell(label, path, kind, opts) {
   return field(label, path, kind, { ...(opts || {}), cell: true });
 }
 
+// A flag that defaults to false as a checkbox: ticked writes `true`, unticked removes the key.
+function boolField(label, path) {
+  const input = h("input", { type: "checkbox" });
+  input.checked = get(S.doc, path) === true;
+  input.dataset.path = path.join(".");
+  input.addEventListener("change", () => safeEdit([input.checked ? { path, value: true } : { path, delete: true }]));
+  return h("div", { class: "field cell", "data-field": path.join(".") }, h("label", {}, label), input);
+}
+
 // `color = [r, g, b]` as a colour picker (absent: the default by kind / palette; × clears it).
 function colorField(label, path) {
   const v = get(S.doc, path);
@@ -1047,7 +1056,7 @@ function actorForm(a, i) {
     h("div", { class: "cells" }, cell("speed_mps", [...p, "speed_mps"], "number"), cell("accel_mps2", [...p, "accel_mps2"], "number"),
       cell("initial_speed_mps", [...p, "initial_speed_mps"], "number"), cell("at_end", [...p, "at_end"], ["", ...K().at_end]),
       cell("length_m", [...p, "length_m"], "number"), cell("width_m", [...p, "width_m"], "number"), cell("height_m", [...p, "height_m"], "number"),
-      colorField("color", [...p, "color"])));
+      colorField("color", [...p, "color"]), boolField("emergency", [...p, "emergency"])));
   if ("behavior" in a) fs.append(field("behavior", [...p, "behavior"], K().behaviors));
   if ("at" in a) fs.append(placeField("at", [...p, "at"], { vclass }));
   if ("waypoints" in a) {
@@ -1107,8 +1116,9 @@ function renderForm() {
     fs.append(field("kind", [...p, "kind"], K().obstacle_kinds),
       placeField("at", [...p, "at"], { vclass: null }), field("name", [...p, "name"], "text"),
       h("div", { class: "cells" }, cell("length_m", [...p, "length_m"], "number"), cell("width_m", [...p, "width_m"], "number"),
-        cell("height_m", [...p, "height_m"], "number"), colorField("color", [...p, "color"])),
-      ...extras(o, ["kind", "at", "name", "length_m", "width_m", "height_m", "color"], p),
+        cell("height_m", [...p, "height_m"], "number"), colorField("color", [...p, "color"]),
+        boolField("emergency", [...p, "emergency"])),
+      ...extras(o, ["kind", "at", "name", "length_m", "width_m", "height_m", "color", "emergency"], p),
       h("button", { type: "button", onclick: () => safeEdit([{ path: ["obstacles", i], delete: true }]) }, "Delete obstacle"));
     form.append(fs);
   });
