@@ -9,19 +9,7 @@ use dh_env::view::{ActorKind, ActorView, LightColor, SignKind, SignView, Traffic
 use std::path::Path;
 
 fn actor(id: u32, kind: ActorKind, pose: Pose, color: [u8; 3], braking: bool) -> ActorView {
-    ActorView {
-        id,
-        kind,
-        pose,
-        speed_mps: 0.0,
-        length_m: 0.0,
-        width_m: 0.0,
-        height_m: 0.0,
-        color,
-        braking,
-        blinkers: 0,
-        beacon: false,
-    }
+    ActorView { braking, ..ActorView::at_rest(id, kind, pose, color) }
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

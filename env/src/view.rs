@@ -73,6 +73,23 @@ pub const BLINKER_RIGHT: u8 = 1;
 pub const BLINKER_LEFT: u8 = 2;
 
 impl ActorView {
+    /// An actor at rest with its kind's default size (zero sizes), no lamps lit and no beacon.
+    pub fn at_rest(id: u32, kind: ActorKind, pose: Pose, color: [u8; 3]) -> ActorView {
+        ActorView {
+            id,
+            kind,
+            pose,
+            speed_mps: 0.0,
+            length_m: 0.0,
+            width_m: 0.0,
+            height_m: 0.0,
+            color,
+            braking: false,
+            blinkers: 0,
+            beacon: false,
+        }
+    }
+
     pub fn footprint(&self) -> Obb {
         Obb { pose: self.pose, half_length: self.length_m * 0.5, half_width: self.width_m * 0.5 }
     }

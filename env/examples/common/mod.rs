@@ -44,19 +44,7 @@ pub fn at(p: Pose, f: f64, l: f64, dyaw: f64) -> Pose {
 
 /// An actor at rest with its kind's default size (zero sizes) and no lamps lit.
 pub fn view(id: u32, kind: ActorKind, pose: Pose, color: [u8; 3]) -> ActorView {
-    ActorView {
-        id,
-        kind,
-        pose,
-        speed_mps: 0.0,
-        length_m: 0.0,
-        width_m: 0.0,
-        height_m: 0.0,
-        color,
-        braking: false,
-        blinkers: 0,
-        beacon: false,
-    }
+    ActorView::at_rest(id, kind, pose, color)
 }
 
 /// A frame of `ego` and `actors` without signals, signs or route.

@@ -26,19 +26,7 @@ fn world() -> &'static (Network, RenderMap) {
 }
 
 fn car(id: u32, pose: Pose, color: [u8; 3]) -> ActorView {
-    ActorView {
-        id,
-        kind: ActorKind::Car,
-        pose,
-        speed_mps: 5.0,
-        length_m: 0.0,
-        width_m: 0.0,
-        height_m: 0.0,
-        color,
-        braking: false,
-        blinkers: 0,
-        beacon: false,
-    }
+    ActorView { speed_mps: 5.0, ..ActorView::at_rest(id, ActorKind::Car, pose, color) }
 }
 
 /// The ego on W2C_1 60 m before its end (a junction ahead), a car 18 m ahead, one oncoming.

@@ -30,19 +30,7 @@ fn ego_pose() -> Pose {
 
 fn actor(id: u32, kind: ActorKind, fwd: f64, left: f64) -> ActorView {
     let e = ego_pose();
-    ActorView {
-        id,
-        kind,
-        pose: Pose::new(e.local_to_world(fwd, left), e.yaw),
-        speed_mps: 0.0,
-        length_m: 0.0,
-        width_m: 0.0,
-        height_m: 0.0,
-        color: [40, 90, 200],
-        braking: false,
-        blinkers: 0,
-        beacon: false,
-    }
+    ActorView::at_rest(id, kind, Pose::new(e.local_to_world(fwd, left), e.yaw), [40, 90, 200])
 }
 
 fn ego() -> ActorView {
