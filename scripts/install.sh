@@ -108,8 +108,12 @@ PY
     if [ -n "${DH_DEPS_DONE:-}" ]; then touch "$DH_DEPS_DONE"; fi
 ) &
 deps_pid=$!
+# No build isolation: the venv already has pyproject's build requirements (maturin and the pinned
+# eclipse-sumo, both installed above), so pip need not install SUMO's 300 MB wheel a second time
+# into a throwaway environment before cargo starts (5-10 s). scripts/wheel_check.sh keeps the
+# isolated build users' `pip wheel .` takes.
 build_rc=0
-env -u SUMO_HOME "$VPY" -m pip install --quiet --no-deps -e . || build_rc=$?
+env -u SUMO_HOME "$VPY" -m pip install --quiet --no-deps --no-build-isolation -e . || build_rc=$?
 deps_rc=0
 wait "$deps_pid" || deps_rc=$?
 if [ "$deps_rc" != 0 ]; then

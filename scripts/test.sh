@@ -14,7 +14,7 @@
 # Extra arguments go to pytest (`bash scripts/test.sh --quick -k scoring`).
 #
 # The full gate runs three lanes on the two cores. The Python lane installs (building the Rust
-# core with maturin while uv installs the dependencies), then runs pytest (two workers), the
+# core with maturin while uv installs the dependencies), then runs pytest (three workers), the
 # heaviest test files first (tests/conftest.py). The checks lane starts when the install is done
 # and runs stubtest and the docs build beside pytest (they are short and would otherwise sit on
 # the critical path). The Rust lane formats, builds and runs the fuzz targets (3 s each), runs
@@ -96,13 +96,14 @@ if [ "$quick" = 1 ]; then
         exit 1
     fi
     # A Rust change needs a new extension before pytest means anything. The gate's flags, so the
-    # quick lane and the gate share one build (clippy lints what is rebuilt).
+    # quick lane and the gate share one build (clippy lints what is rebuilt). No build isolation,
+    # as install.sh: the venv has the build requirements, and pip need not reinstall them each time.
     core="$(ls python/drivehierarchy/_core*.so | head -1)"
     if [ -n "$(find env agents benchmark python/src python/build.rs python/Cargo.toml Cargo.toml Cargo.lock \
         -newer "$core" \( -name '*.rs' -o -name Cargo.toml -o -name Cargo.lock -o -name '*.cpp' \) \
         -not -path '*/target/*' -not -path '*/tests/*' -print -quit)" ]; then
         step "rebuild the extension (a Rust source is newer than $core)"
-        env -u SUMO_HOME "${BUILD[@]}" "$PY" -m pip install --quiet --no-deps -e .
+        env -u SUMO_HOME "${BUILD[@]}" "$PY" -m pip install --quiet --no-deps --no-build-isolation -e .
     fi
     export PATH="$PWD/.venv/bin:$PATH"
     step "cargo fmt"; cargo fmt --all -- --check
@@ -177,10 +178,11 @@ touch "$built"
 export PATH="$PWD/.venv/bin:$PATH"
 checks_lane >"$checks_log" 2>&1 &
 checks_pid=$!
-# Two workers, each taking whole files (`--dist loadfile`): a file's module fixtures (the docs
-# walk's shared folder, a loopback server) stay in one process. (Three were not faster: the work
-# is CPU-bound.)
-step "pytest";   $PY -m pytest tests -n 2 --dist loadfile --durations=15 "$@"
+# Three workers on the two cores, each taking whole files (`--dist loadfile`): a file's module
+# fixtures (the docs walk's shared folder, a loopback server) stay in one process. A worker often
+# waits (on a SUMO socket, a server's start, a browser); a third one fills those gaps: the suite
+# alone took 369 s with three and 401 s with two on this machine kind.
+step "pytest";   $PY -m pytest tests -n 3 --dist loadfile --durations=15 "$@"
 step "pytest done; waiting for the other lanes"
 checks_rc=0
 wait "$checks_pid" || checks_rc=$?

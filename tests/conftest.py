@@ -75,8 +75,8 @@ def reference_rows() -> list[dict[str, Any]]:
 
 
 # The files that take the most CPU in the gate, longest first, run before all others. With
-# `-n 2 --dist loadfile` a file is one unit of work on one worker; a long file started last keeps
-# one core busy while the other idles, and longest-first keeps the two workers' end times close.
+# `--dist loadfile` a file is one unit of work on one worker; a long file started last keeps one
+# worker busy while the others are done, and longest-first keeps the workers' end times close.
 # (CPU-seconds per file, measured with getrusage in a full run; order only, never skips.)
 HEAVY_FIRST = (
     "tests/docs/test_docs_commands_run.py",  # ~170 CPU-s: every documented command as a process

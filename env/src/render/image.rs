@@ -89,3 +89,43 @@ impl Image {
         Ok(Image { width: img.width(), height: img.height(), data: img.into_raw() })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn gradient(w: u32, h: u32) -> Image {
+        let mut img = Image::new(w, h);
+        for (i, v) in img.data.iter_mut().enumerate() {
+            *v = (i * 7 % 251) as u8;
+        }
+        img
+    }
+
+    #[test]
+    fn png_round_trips_and_jpeg_is_a_jfif_stream() {
+        let dir = std::env::temp_dir().join(format!("dh_image_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let img = gradient(37, 21);
+        img.save(dir.join("a.png")).unwrap();
+        assert_eq!(Image::load(dir.join("a.png")).unwrap(), img);
+        let jpg = img.to_jpeg(90).unwrap();
+        assert_eq!((&jpg[..2], &jpg[jpg.len() - 2..]), (&[0xFF, 0xD8][..], &[0xFF, 0xD9][..]));
+        img.save(dir.join("a.jpg")).unwrap();
+        let err = img.save(dir.join("a.bmp")).unwrap_err().to_string();
+        assert!(err.contains("a.bmp") && err.contains("bmp"), "{err}");
+        let back = Image::load(dir.join("a.jpg")).unwrap();
+        assert_eq!((back.width, back.height), (37, 21));
+        let err = Image::load(dir.join("missing.png")).unwrap_err().to_string();
+        assert!(err.contains("missing.png"), "{err}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_buffer_of_the_wrong_size_is_refused() {
+        let mut img = gradient(4, 4);
+        img.data.pop();
+        assert!(img.to_png().unwrap_err().to_string().contains("does not match 4x4"));
+        assert!(img.to_jpeg(80).is_err());
+    }
+}
