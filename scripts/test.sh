@@ -14,7 +14,7 @@
 # Extra arguments go to pytest (`bash scripts/test.sh --quick -k scoring`).
 #
 # The full gate runs three lanes on the two cores. The Python lane installs (building the Rust
-# core with maturin while uv installs the dependencies), then runs pytest (three workers), the
+# core with maturin while uv installs the dependencies), then runs pytest (two workers), the
 # heaviest test files first (tests/conftest.py). The checks lane starts when the install is done
 # and runs stubtest and the docs build beside pytest (they are short and would otherwise sit on
 # the critical path). The Rust lane formats, builds and runs the fuzz targets (3 s each), runs
@@ -178,11 +178,12 @@ touch "$built"
 export PATH="$PWD/.venv/bin:$PATH"
 checks_lane >"$checks_log" 2>&1 &
 checks_pid=$!
-# Three workers on the two cores, each taking whole files (`--dist loadfile`): a file's module
-# fixtures (the docs walk's shared folder, a loopback server) stay in one process. A worker often
-# waits (on a SUMO socket, a server's start, a browser); a third one fills those gaps: the suite
-# alone took 369 s with three and 401 s with two on this machine kind.
-step "pytest";   $PY -m pytest tests -n 3 --dist loadfile --durations=15 "$@"
+# Two workers, each taking whole files (`--dist loadfile`): a file's module fixtures (the docs
+# walk's shared folder, a loopback server) stay in one process. Three are faster for pytest alone
+# (369 s vs 401 s: a worker often waits on a socket, a server or a browser), but not in the gate,
+# where the Rust lane fills those gaps: there a third worker only stretched the long sequential
+# files (the docs walk) and the Rust lane (802 s on a fresh clone, against 751-783 s with two).
+step "pytest";   $PY -m pytest tests -n 2 --dist loadfile --durations=15 "$@"
 step "pytest done; waiting for the other lanes"
 checks_rc=0
 wait "$checks_pid" || checks_rc=$?
