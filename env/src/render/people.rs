@@ -163,12 +163,18 @@ fn torso_and_head(m: &mut Mesh, fr: &Frame, b: &Body, dz: f32, lean: f32, look: 
         [0.12 * s + lean, 0.11 * s - lean, 0.205 * s],
         &[look.trousers, look.shirt, look.shirt, look.shirt, look.shirt, look.shirt],
     );
+    neck_and_head(m, fr, b, lean, shoulder_z, look);
+}
+
+/// Neck and head over the shoulders at (`x` forward, `shoulder_z` up) in `fr`.
+fn neck_and_head(m: &mut Mesh, fr: &Frame, b: &Body, x: f32, shoulder_z: f32, look: &Look) {
+    let s = b.s;
     let hz = shoulder_z + 0.05 * s;
     let hr = b.head;
-    m.bx(fr, lean, 0.0, shoulder_z, hz, 0.04 * s, 0.04 * s, &all(look.skin));
+    m.bx(fr, x, 0.0, shoulder_z, hz, 0.04 * s, 0.04 * s, &all(look.skin));
     m.bx(
         fr,
-        lean,
+        x,
         0.0,
         hz,
         hz + 2.0 * hr,
@@ -218,19 +224,7 @@ fn wheelchair(m: &mut Mesh, fr: &Frame, a: &ActorView, h: f32) {
         m.strut(fr, sh, hand, 0.045 * s, 0.045 * s, look.shirt);
         m.bx(fr, hand[0], hand[1], hand[2] - 0.04, hand[2] + 0.03, 0.04, 0.03, &all(look.skin));
     }
-    let hr = b.head;
-    let hz = shoulder[1] + 0.05 * s;
-    m.bx(fr, shoulder[0], 0.0, shoulder[1], hz, 0.04 * s, 0.04 * s, &all(look.skin));
-    m.bx(
-        fr,
-        shoulder[0],
-        0.0,
-        hz,
-        hz + 2.0 * hr,
-        hr * 0.92,
-        hr * 0.85,
-        &[look.skin, look.hair, look.skin, look.skin, look.hair, look.skin],
-    );
+    neck_and_head(m, fr, &b, shoulder[0], shoulder[1], &look);
 }
 
 /// A person riding a bicycle along +forward of `fr`: two wheels, a diamond frame, handlebar,

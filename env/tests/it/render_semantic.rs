@@ -34,19 +34,7 @@ fn actor(id: u32, kind: ActorKind, fwd: f64, left: f64) -> ActorView {
 }
 
 fn ego() -> ActorView {
-    ActorView {
-        id: 0,
-        kind: ActorKind::Car,
-        pose: ego_pose(),
-        speed_mps: 0.0,
-        length_m: 4.6,
-        width_m: 1.9,
-        height_m: 1.5,
-        color: [200, 200, 200],
-        braking: false,
-        blinkers: 0,
-        beacon: false,
-    }
+    crate::common::grey_ego(ego_pose())
 }
 
 fn frame<'a>(

@@ -4,7 +4,7 @@
 use dh_env::geom::Pose;
 use dh_env::map::Network;
 use dh_env::render::{render_bev, render_camera, BevConfig, CameraConfig, FrameInput, Image, RenderMap};
-use dh_env::view::{ActorKind, ActorView};
+use dh_env::view::ActorView;
 use std::path::Path;
 
 fn net() -> Network {
@@ -12,19 +12,7 @@ fn net() -> Network {
 }
 
 fn ego(pose: Pose) -> ActorView {
-    ActorView {
-        id: 0,
-        kind: ActorKind::Car,
-        pose,
-        speed_mps: 0.0,
-        length_m: 4.6,
-        width_m: 1.9,
-        height_m: 1.5,
-        color: [200, 200, 200],
-        braking: false,
-        blinkers: 0,
-        beacon: false,
-    }
+    crate::common::grey_ego(pose)
 }
 
 fn frame(e: &ActorView) -> FrameInput<'_> {

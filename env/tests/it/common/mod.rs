@@ -1,8 +1,11 @@
-//! Scenario-file helpers shared by the format tests: an ego eastbound on town01's C2T_1 plus a
-//! test's own TOML body, written to a per-test-binary temp folder and loaded.
+//! Helpers shared by the integration tests: scenario files (an ego eastbound on town01's
+//! C2T_1 plus a test's own TOML body, written to a per-test-binary temp folder and loaded), and
+//! the render tests' ego.
 
 use dh_env::drive::Control;
+use dh_env::geom::Pose;
 use dh_env::scenario::{ResolvedScenario, Scenario};
+use dh_env::view::{ActorKind, ActorView};
 use dh_env::world::World;
 use std::path::PathBuf;
 
@@ -62,4 +65,14 @@ speed_mps = {speed}
 pub fn cruise(w: &World, v: f64) -> Control {
     let e = v - w.ego().speed_mps;
     Control { throttle: (0.5 * e).clamp(0.0, 1.0), brake: (-0.5 * e).clamp(0.0, 1.0), steer: 0.0 }
+}
+
+/// The render tests' ego: a grey car of the default car size, at rest.
+pub fn grey_ego(pose: Pose) -> ActorView {
+    ActorView {
+        length_m: 4.6,
+        width_m: 1.9,
+        height_m: 1.5,
+        ..ActorView::at_rest(0, ActorKind::Car, pose, [200, 200, 200])
+    }
 }
