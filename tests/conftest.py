@@ -78,7 +78,7 @@ def reference_rows() -> list[dict[str, Any]]:
 # (CPU-seconds per file, measured with getrusage in a full run; order only, never skips.)
 HEAVY_FIRST = (
     "tests/docs/test_docs_commands_run.py",  # ~170 CPU-s: every documented command as a process
-    "tests/fuzz/test_agent_fuzz.py",  # ~125: 1,448 bad-driver episodes
+    "tests/fuzz/test_agent_fuzz.py",  # ~90: 1,340 bad-driver episodes
     "tests/scripts/test_scripts_quick.py",  # ~65
     "tests/editor/test_e2e.py",  # ~50: Chromium
     "tests/baselines/test_end_to_end.py",  # ~50: training runs
