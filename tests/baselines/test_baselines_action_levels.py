@@ -18,6 +18,7 @@ pytest.importorskip("stable_baselines3")
 pytest.importorskip("minari")
 
 from gymnasium import spaces
+from parity_helpers import wrapped_and_runner_records
 from stable_baselines3.common.env_checker import check_env
 from stable_baselines3.common.vec_env import DummyVecEnv
 
@@ -35,7 +36,6 @@ LEVELS = ("control", "waypoints", "meta")
 R4 = builtin_root() / "r4"
 SCENARIO = R4 / "07_sudden_brake" / "town01_07_lead_brakes.toml"
 SUITE = [SCENARIO, R4 / "03_turning" / "town01_03_right_turn_signalised.toml"]
-WALL_CLOCK_KEYS = ("wall_duration", "duration_system")
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -231,20 +231,7 @@ def test_the_agent_drives_exactly_like_the_training_wrappers_at_the_waypoint_lev
 ) -> None:
     out = tmp_path / "bc"
     cli("baselines", "train", "bc", "--data", demos["waypoints"], "--epochs", "5", "--out", out)
-    agent = Sb3Agent(out / "model.zip")
-    env = make_env([SCENARIO], agent.wrapper, monitor=False)
-    obs, _ = env.reset(seed=0)
-    while True:
-        a, _ = agent.model.predict(obs, deterministic=True)
-        obs, _, term, trunc, _ = env.step(a)
-        if term or trunc:
-            break
-    wrapped = env.unwrapped.score()
-    cli("r4", "run", "--agent", f"sb3:{out / 'model.zip'}", "--scenario", SCENARIO, "--out", tmp_path / "ev")
-    via_runner = json.loads(next((tmp_path / "ev" / "scenes").glob("*/scene_score.json")).read_text())
-    for record in (via_runner, wrapped):
-        for key in WALL_CLOCK_KEYS:
-            record["meta"].pop(key, None)
+    wrapped, via_runner = wrapped_and_runner_records(out / "model.zip", SCENARIO, tmp_path / "ev")
     assert via_runner == wrapped
 
 

@@ -20,16 +20,15 @@ import pytest
 pytest.importorskip("stable_baselines3")
 pytest.importorskip("minari")
 
+from parity_helpers import wrapped_and_runner_records
+
 from drivehierarchy.agents.sb3 import Sb3Agent
 from drivehierarchy.baselines.imitation import DATASET_ID, load_demos
 from drivehierarchy.baselines.model_io import load_model, read_meta
 from drivehierarchy.baselines.splits import TRAIN_SEED_MIN
-from drivehierarchy.baselines.wrappers import make_env
 from drivehierarchy.cli import main
 from drivehierarchy.scenarios import builtin_root
 
-# Score-record fields measuring wall-clock time (names before/after protocol v2).
-WALL_CLOCK_KEYS = ("wall_duration", "duration_system")
 INTERSECTION = builtin_root() / "r4" / "04_intersection" / "town01_04_straight_cross_traffic.toml"
 T_JUNCTION = builtin_root() / "r4" / "05_t_intersection" / "town01_05_left_turn_t.toml"
 
@@ -230,30 +229,8 @@ def test_the_agent_drives_exactly_like_the_training_wrappers(demos: Path, tmp_pa
     """`sb3:` through the plain env == the model on the wrapped env it was trained on."""
     out = tmp_path / "bc"
     cli("baselines", "train", "bc", "--data", demos, "--epochs", "5", "--out", out)
-    agent = Sb3Agent(out / "model.zip")
-    assert agent.uses_images is False
-    env = make_env([INTERSECTION], agent.wrapper, monitor=False)
-    obs, _ = env.reset(seed=0)
-    while True:
-        a, _ = agent.model.predict(obs, deterministic=True)
-        obs, _, term, trunc, _ = env.step(a)
-        if term or trunc:
-            break
-    wrapped = env.unwrapped.score()
-    cli(
-        "r4",
-        "run",
-        "--agent",
-        f"sb3:{out / 'model.zip'}",
-        "--scenario",
-        INTERSECTION,
-        "--out",
-        tmp_path / "ev",
-    )
-    via_runner = json.loads(next((tmp_path / "ev" / "scenes").glob("*/scene_score.json")).read_text())
-    for record in (via_runner, wrapped):
-        for key in WALL_CLOCK_KEYS:  # wall-clock time, the one non-simulated field
-            record["meta"].pop(key, None)
+    assert Sb3Agent(out / "model.zip").uses_images is False
+    wrapped, via_runner = wrapped_and_runner_records(out / "model.zip", INTERSECTION, tmp_path / "ev")
     assert via_runner == wrapped
 
 
