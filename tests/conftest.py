@@ -75,12 +75,12 @@ def reference_rows() -> list[dict[str, Any]]:
 # The files that take the most CPU in the gate, longest first, run before all others. With
 # `--dist loadfile` a file is one unit of work on one worker; a long file started last keeps one
 # worker busy while the others are done, and longest-first keeps the workers' end times close.
-# (CPU-seconds per file, measured with getrusage in a full run; order only, never skips.)
+# (CPU-seconds per file, its processes included, read from /proc; order only, never skips.)
 HEAVY_FIRST = (
-    "tests/docs/test_docs_commands_run.py",  # ~170 CPU-s: every documented command as a process
-    "tests/fuzz/test_agent_fuzz.py",  # ~90: 1,340 bad-driver episodes
+    "tests/docs/test_docs_commands_run.py",  # ~165 CPU-s: every documented command as a process
+    "tests/fuzz/test_agent_fuzz.py",  # ~110: 1,340 bad-driver episodes
+    "tests/editor/test_e2e.py",  # ~90: Chromium and the editor server
     "tests/scripts/test_scripts_quick.py",  # ~65
-    "tests/editor/test_e2e.py",  # ~50: Chromium
     "tests/baselines/test_end_to_end.py",  # ~50: training runs
     "tests/openloop/generate/test_generate.py",  # ~45: whole generated sets
     "tests/vlm/test_transformers_serve.py",  # ~30
