@@ -31,7 +31,8 @@ def wrapped_and_runner_records(
             break
     wrapped = env.unwrapped.score()
     argv = ["r4", "run", "--agent", f"sb3:{model}", "--scenario", str(scenario), "--out", str(out)]
-    assert main(argv) == 0
+    rc = main(argv)
+    assert rc == 0, f"drivehierarchy {' '.join(argv)} exited {rc}"
     via_runner = json.loads(next((out / "scenes").glob("*/scene_score.json")).read_text())
     for record in (via_runner, wrapped):
         for key in WALL_CLOCK_KEYS:

@@ -64,7 +64,7 @@ def fuzz_tasks() -> list[tuple[str, str, int, str, bool]]:
             tasks.append((str(p), kind, 0, "libsumo", False))
             # The Python transport (libsumo-python, the fallback) drives every fourth kind of each
             # SUMO scenario, rotating between scenarios: every kind meets it on a quarter of them.
-            # Its episodes cost ~5x a shim episode (half the file's CPU at every other kind), and
+            # Its episodes cost ~5x a shim episode (about half the file's CPU at every other kind), and
             # the orchestration above it is one Rust implementation whose transports are tested
             # bit-identical (tests/envs/test_traffic_sumo.py).
             if sumo and ((k + sumo_seen) % 4 == 0 or kind in SAMPLED):
