@@ -13,14 +13,15 @@
 #                                  source is newer than it. No Rust tests, docs build, wheel or fuzz.
 # Extra arguments go to pytest (`bash scripts/test.sh --quick -k scoring`).
 #
-# The full gate runs three lanes on the two cores. The Python lane installs (building the Rust
+# The full gate runs four lanes on the two cores. The Python lane installs (building the Rust
 # core with maturin while uv installs the dependencies), then runs pytest (two workers), the
 # heaviest test files first (tests/conftest.py). The checks lane starts when the install is done
 # and runs stubtest and the docs build beside pytest (they are short and would otherwise sit on
-# the critical path). The Rust lane formats, builds and runs the fuzz targets (3 s each), runs
-# ruff and mypy once the dependencies are installed (they need no build), waits for the
-# install's build, then runs clippy + the Rust tests on that same build and the wheel check. Each step prints when it starts; the
-# background lanes' output is printed when they end, and the script fails if any lane failed.
+# the critical path). The Rust lane formats, runs ruff and mypy once the dependencies are
+# installed (they need no build), waits for the install's build, then runs clippy + the Rust
+# tests on that same build and the wheel check. The fuzz lane builds the fuzz targets at the
+# lowest priority and runs each for 3 s. Each step prints when it starts; the background lanes'
+# output is printed when they end, and the script fails if any lane failed.
 #
 # One release build serves the extension, clippy, the Rust tests and the wheel: the install, the
 # wheel and `cargo test --release` get the same profile, flags, features and build-script inputs
@@ -118,22 +119,16 @@ if [ "$quick" = 1 ]; then
 fi
 
 rust_log="$(mktemp)"
+fuzz_log="$(mktemp)"
 checks_log="$(mktemp)"
 built="$(mktemp -u)"  # exists once the install has built the extension
 deps="$(mktemp -u)"   # exists once the install has installed the dependencies (DH_DEPS_DONE)
 rust_lane() {
     set -euo pipefail
     step "rust: cargo fmt"; cargo fmt --all -- --check
-    # The fuzz build and run first, beside the install: they fill the core its build chain and
-    # downloads leave idle. (Measured alternatives, all slower: at nice 10 the fuzz build starved
-    # behind pytest; after the Rust tests it slowed pytest more than it slows the install.)
-    # CARGO_INCREMENTAL=0: a fresh clone builds the fuzz crate once, so incremental caches
-    # (the dev profile's default) are work nobody reads. Debug info: fuzz/Cargo.toml's dev
-    # profile (line tables for our crates, none for dependencies).
-    step "rust: fuzz"; CARGO_INCREMENTAL=0 FUZZ_DEV=1 bash scripts/fuzz.sh 3
-    # Ruff and mypy need no build, only the dependencies (installed long before the fuzz run
-    # ends): they run here, in the install's serial tail (the extension crate builds on one core
-    # while this lane would wait), instead of beside pytest when both cores are busy.
+    # Ruff and mypy need no build, only the dependencies: they run here, in the install's serial
+    # tail (the extension crate builds on one core while this lane would wait), instead of beside
+    # pytest when both cores are busy.
     step "rust: waiting for the install's dependencies"
     until [ -e "$deps" ]; do sleep 1; done
     step "rust: ruff";  $PY -m ruff check .
@@ -149,6 +144,21 @@ rust_lane() {
     step "rust: wheel"; env "${BUILD[@]}" bash scripts/wheel_check.sh
     step "rust: done"
 }
+# The fuzz targets build at the lowest CPU priority: a second full build (nightly, coverage
+# instrumentation) that nothing else waits for. Beside the install at normal priority it took a
+# core from the extension's build (the install: 275 s with it, 193 s without); niced, it takes
+# the cycles the install and pytest leave idle (the extension's serial tail, pytest's waits on
+# sockets and servers). The bounded runs (3 s per target, by the clock) run at normal priority,
+# so each gets its share of executions. CARGO_INCREMENTAL=0: a fresh clone builds the fuzz crate
+# once, so incremental caches are work nobody reads. Debug info: fuzz/Cargo.toml's dev profile
+# (line tables for our crates, none for dependencies).
+fuzz_lane() {
+    set -euo pipefail
+    step "fuzz: build (nice 19)"
+    CARGO_INCREMENTAL=0 FUZZ_DEV=1 FUZZ_BUILD_ONLY=1 nice -n 19 bash scripts/fuzz.sh 3
+    step "fuzz: run";  CARGO_INCREMENTAL=0 FUZZ_DEV=1 bash scripts/fuzz.sh 3
+    step "fuzz: done"
+}
 # The stub contract and the docs site need the built extension: short, and independent of
 # pytest, so they run beside it instead of before it. The docs build is strict and not --quiet: --quiet raises the log level
 # above WARNING, so strict mode would never count a warning (tests/docs/test_docs_build.py holds
@@ -161,11 +171,13 @@ checks_lane() {
 }
 rust_lane >"$rust_log" 2>&1 &
 rust_pid=$!
+fuzz_lane >"$fuzz_log" 2>&1 &
+fuzz_pid=$!
 checks_pid=""
 # A failing Python lane (set -e) must not leave the other lanes running.
 cleanup() {
     local pid
-    for pid in "$rust_pid" $checks_pid; do
+    for pid in "$rust_pid" "$fuzz_pid" $checks_pid; do
         pkill -P "$pid" 2>/dev/null || true
         kill "$pid" 2>/dev/null || true
     done
@@ -189,20 +201,27 @@ checks_rc=0
 wait "$checks_pid" || checks_rc=$?
 rust_rc=0
 wait "$rust_pid" || rust_rc=$?
+fuzz_rc=0
+wait "$fuzz_pid" || fuzz_rc=$?
 trap - EXIT
 rm -f "$built" "$deps"
 echo "---- checks lane (stubtest, docs) ----"
 cat "$checks_log"
-echo "---- Rust lane (fmt, fuzz, ruff, mypy, clippy, cargo test, wheel) ----"
+echo "---- Rust lane (fmt, ruff, mypy, clippy, cargo test, wheel) ----"
 cat "$rust_log"
-rm -f "$rust_log" "$checks_log"
+echo "---- fuzz lane (the fuzz targets' build and bounded run) ----"
+cat "$fuzz_log"
+rm -f "$rust_log" "$fuzz_log" "$checks_log"
 if [ "$checks_rc" != 0 ]; then
     echo "test.sh: the checks lane failed (exit $checks_rc; its output is above)" >&2
 fi
 if [ "$rust_rc" != 0 ]; then
     echo "test.sh: the Rust lane failed (exit $rust_rc; its output is above)" >&2
 fi
-if [ "$checks_rc" != 0 ] || [ "$rust_rc" != 0 ]; then
+if [ "$fuzz_rc" != 0 ]; then
+    echo "test.sh: the fuzz lane failed (exit $fuzz_rc; its output is above)" >&2
+fi
+if [ "$checks_rc" != 0 ] || [ "$rust_rc" != 0 ] || [ "$fuzz_rc" != 0 ]; then
     exit 1
 fi
 step "done"
